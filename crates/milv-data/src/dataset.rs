@@ -1,0 +1,463 @@
+//! [`Dataset`]: a folder of versioned tables, opened at `PATH` or `PATH@N`.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fs::File;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use deltalake::arrow::array::RecordBatch;
+use deltalake::parquet::arrow::ProjectionMask;
+use deltalake::parquet::arrow::arrow_reader::{ParquetRecordBatchReader, ParquetRecordBatchReaderBuilder};
+
+use crate::delta;
+use crate::error::{Error, Result};
+use crate::log::{self, CommitMeta, FileAdd, TableChange, VersionEntry};
+use crate::schema::TableKind;
+use crate::shard::{ShardOptions, ShardWriter};
+
+/// `PATH` or `PATH@VERSION`, as given on a command line.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct DatasetRef {
+    pub root: PathBuf,
+    pub version: Option<u64>,
+}
+
+impl FromStr for DatasetRef {
+    type Err = Error;
+
+    fn from_str(s: &str) -> Result<Self> {
+        if s.is_empty() {
+            return Err(Error::BadReference(s.into()));
+        }
+        // Only a trailing `@digits` is a version, so paths containing '@' still work.
+        if let Some((path, v)) = s.rsplit_once('@')
+            && !v.is_empty()
+            && v.bytes().all(|b| b.is_ascii_digit())
+        {
+            if path.is_empty() {
+                return Err(Error::BadReference(s.into()));
+            }
+            let version = v.parse().map_err(|_| Error::BadReference(s.into()))?;
+            return Ok(DatasetRef {
+                root: PathBuf::from(path),
+                version: Some(version),
+            });
+        }
+        Ok(DatasetRef {
+            root: PathBuf::from(s),
+            version: None,
+        })
+    }
+}
+
+impl std::fmt::Display for DatasetRef {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self.version {
+            Some(v) => write!(f, "{}@{v}", self.root.display()),
+            None => write!(f, "{}", self.root.display()),
+        }
+    }
+}
+
+/// One data file of a table at some version.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TableFile {
+    pub table: TableKind,
+    pub abs_path: PathBuf,
+    pub info: FileAdd,
+    /// Dataset version that added the file.
+    pub added_in: u64,
+}
+
+/// A versioned dataset. Cheap to open; every read names a version.
+pub struct Dataset {
+    root: PathBuf,
+    rt: tokio::runtime::Runtime,
+}
+
+impl std::fmt::Debug for Dataset {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Dataset").field("root", &self.root).finish()
+    }
+}
+
+fn runtime() -> Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .map_err(Error::io("start async runtime", "."))
+}
+
+impl Dataset {
+    /// Opens an existing dataset.
+    pub fn open(root: impl AsRef<Path>) -> Result<Self> {
+        let root = root.as_ref().to_path_buf();
+        log::list_versions(&root)?;
+        Ok(Dataset { root, rt: runtime()? })
+    }
+
+    /// Opens a dataset, creating an empty one (version 0) if the folder has none.
+    pub fn open_or_create(root: impl AsRef<Path>, meta: CommitMeta) -> Result<Self> {
+        let root = root.as_ref().to_path_buf();
+        let dir = log::log_dir(&root);
+        std::fs::create_dir_all(&dir).map_err(Error::io("create dataset", &dir))?;
+        if log::list_versions(&root)?.is_empty() {
+            let entry = VersionEntry {
+                format: log::ENTRY_FORMAT.into(),
+                version: 0,
+                parent: None,
+                timestamp_ms: now_ms(),
+                meta: CommitMeta {
+                    operation: "create".into(),
+                    ..meta
+                },
+                tables: BTreeMap::new(),
+            };
+            // Losing this race just means someone else created it.
+            log::try_create_entry(&root, &entry)?;
+        }
+        Ok(Dataset { root, rt: runtime()? })
+    }
+
+    pub fn root(&self) -> &Path {
+        &self.root
+    }
+
+    /// All versions, ascending.
+    pub fn versions(&self) -> Result<Vec<u64>> {
+        log::list_versions(&self.root)
+    }
+
+    /// The newest version. Versions are visible as soon as their log entry exists.
+    pub fn latest_version(&self) -> Result<u64> {
+        self.versions()?
+            .last()
+            .copied()
+            .ok_or_else(|| Error::NotADataset(self.root.clone()))
+    }
+
+    /// `None` -> latest; `Some(v)` -> `v` if it exists.
+    pub fn resolve(&self, version: Option<u64>) -> Result<u64> {
+        let latest = self.latest_version()?;
+        match version {
+            None => Ok(latest),
+            Some(v) if v <= latest && self.versions()?.binary_search(&v).is_ok() => Ok(v),
+            Some(v) => Err(Error::NoSuchVersion {
+                version: v,
+                latest,
+                path: self.root.clone(),
+            }),
+        }
+    }
+
+    pub fn entry(&self, version: u64) -> Result<VersionEntry> {
+        log::read_entry(&self.root, version)
+    }
+
+    /// Every entry up to and including `version`.
+    pub fn entries_until(&self, version: u64) -> Result<Vec<VersionEntry>> {
+        self.versions()?
+            .into_iter()
+            .filter(|v| *v <= version)
+            .map(|v| self.entry(v))
+            .collect()
+    }
+
+    pub fn table_root(&self, table: TableKind) -> PathBuf {
+        self.root.join(table.name())
+    }
+
+    /// The files making up `table` at dataset `version`, in the order they were added.
+    pub fn files(&self, table: TableKind, version: u64) -> Result<Vec<TableFile>> {
+        let mut live: Vec<TableFile> = Vec::new();
+        for entry in self.entries_until(version)? {
+            let Some(change) = entry.tables.get(table.name()) else {
+                continue;
+            };
+            let removed: BTreeSet<&str> = change.remove.iter().map(String::as_str).collect();
+            live.retain(|f| !removed.contains(f.info.path.as_str()));
+            live.extend(change.add.iter().map(|a| TableFile {
+                table,
+                abs_path: self.table_root(table).join(&a.path),
+                info: a.clone(),
+                added_in: entry.version,
+            }));
+        }
+        Ok(live)
+    }
+
+    /// Streams the rows of `table` at `version`, optionally only some columns.
+    pub fn scan(
+        &self,
+        table: TableKind,
+        version: u64,
+        columns: Option<&[&str]>,
+    ) -> Result<impl Iterator<Item = Result<RecordBatch>> + use<>> {
+        let files = self.files(table, version)?;
+        let columns: Option<Vec<String>> = columns.map(|c| c.iter().map(|s| s.to_string()).collect());
+        Ok(files.into_iter().flat_map(move |f| {
+            let reader = open_parquet(&f.abs_path, columns.as_deref());
+            let (reader, path) = match reader {
+                Ok(r) => (r, f.abs_path),
+                Err(e) => return Box::new(std::iter::once(Err(e))) as Box<dyn Iterator<Item = _>>,
+            };
+            Box::new(reader.map(move |b| {
+                b.map_err(|e| Error::Parquet {
+                    source: e.into(),
+                    path: path.clone(),
+                })
+            }))
+        }))
+    }
+
+    /// Reads a whole (small) table into memory.
+    pub fn read_all(&self, table: TableKind, version: u64) -> Result<Vec<RecordBatch>> {
+        self.scan(table, version, None)?.collect()
+    }
+
+    /// The Delta version each table had at each dataset version (from the tables' history).
+    pub fn delta_versions(&self) -> Result<BTreeMap<TableKind, BTreeMap<u64, u64>>> {
+        self.rt.block_on(async {
+            let mut out = BTreeMap::new();
+            for t in TableKind::ALL {
+                out.insert(t, delta::version_map(&self.root, t).await?);
+            }
+            Ok(out)
+        })
+    }
+
+    /// Delta table versions pinned by dataset `version` (tables created by then).
+    pub fn pinned_delta_versions(&self, version: u64) -> Result<BTreeMap<TableKind, u64>> {
+        let maps = self.delta_versions()?;
+        Ok(maps
+            .into_iter()
+            .filter_map(|(t, m)| m.range(..=version).next_back().map(|(_, tv)| (t, *tv)))
+            .collect())
+    }
+
+    /// Relative file paths Delta itself lists for a table at a Delta version.
+    pub fn delta_files(&self, table: TableKind, delta_version: u64) -> Result<Vec<String>> {
+        self.rt
+            .block_on(delta::files_at(&self.root, table, delta_version))
+    }
+
+    /// Versions whose entries some table has not received yet (a writer stopped between
+    /// creating the entry and committing it to the tables).
+    pub fn pending(&self) -> Result<Vec<(u64, TableKind)>> {
+        self.rt.block_on(async {
+            let mut out = Vec::new();
+            let versions = self.versions()?;
+            for t in TableKind::ALL {
+                let applied = if self.table_root(t).join("_delta_log").is_dir() {
+                    let table = delta::open_or_create(&self.root, t).await?;
+                    delta::applied_version(&table, t).await?
+                } else {
+                    None
+                };
+                for &v in &versions {
+                    if applied.is_some_and(|a| v <= a) {
+                        continue;
+                    }
+                    if self.entry(v)?.tables.contains_key(t.name()) {
+                        out.push((v, t));
+                    }
+                }
+            }
+            out.sort();
+            Ok(out)
+        })
+    }
+
+    /// Commits every logged version to the Delta tables that lack it. Idempotent.
+    pub fn roll_forward(&self) -> Result<usize> {
+        let pending = self.pending()?;
+        self.rt.block_on(async {
+            for (v, t) in &pending {
+                let entry = self.entry(*v)?;
+                delta::apply(&self.root, *t, &entry).await?;
+            }
+            Ok(pending.len())
+        })
+    }
+
+    /// Runs Delta's vacuum (full mode) on every table; returns the deleted paths.
+    pub fn vacuum_tables(&self, retain_hours: u64, dry_run: bool) -> Result<Vec<String>> {
+        self.rt.block_on(async {
+            let mut deleted = Vec::new();
+            for t in TableKind::ALL {
+                if !self.table_root(t).join("_delta_log").is_dir() {
+                    continue;
+                }
+                let table = delta::open_or_create(&self.root, t).await?;
+                deleted.extend(delta::vacuum(table, t, retain_hours, dry_run).await?);
+            }
+            Ok(deleted)
+        })
+    }
+
+    /// Starts a change planned against the latest version.
+    pub fn begin(&self, meta: CommitMeta) -> Result<Transaction<'_>> {
+        Ok(Transaction {
+            ds: self,
+            base: self.latest_version()?,
+            meta,
+            changes: BTreeMap::new(),
+        })
+    }
+}
+
+pub(crate) fn open_parquet(path: &Path, columns: Option<&[String]>) -> Result<ParquetRecordBatchReader> {
+    let file = File::open(path).map_err(Error::io("open shard", path))?;
+    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(Error::parquet(path))?;
+    let builder = match columns {
+        Some(cols) => {
+            let mask = ProjectionMask::columns(builder.parquet_schema(), cols.iter().map(String::as_str));
+            builder.with_projection(mask)
+        }
+        None => builder,
+    };
+    builder
+        .with_batch_size(1024)
+        .build()
+        .map_err(Error::parquet(path))
+}
+
+fn now_ms() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as i64)
+}
+
+/// A change being prepared: files are written first, then [`Transaction::commit`] makes
+/// them one new dataset version with one Delta commit per table touched.
+pub struct Transaction<'a> {
+    ds: &'a Dataset,
+    base: u64,
+    meta: CommitMeta,
+    changes: BTreeMap<TableKind, TableChange>,
+}
+
+impl Transaction<'_> {
+    pub fn base_version(&self) -> u64 {
+        self.base
+    }
+
+    pub fn meta_mut(&mut self) -> &mut CommitMeta {
+        &mut self.meta
+    }
+
+    /// A writer for new files of `table` (they stay invisible until the commit).
+    pub fn shard_writer(&self, table: TableKind, opts: ShardOptions) -> Result<ShardWriter> {
+        ShardWriter::new(&self.ds.table_root(table), table, opts)
+    }
+
+    pub fn add_files(&mut self, table: TableKind, files: Vec<FileAdd>, episodes: Vec<String>) {
+        let c = self.changes.entry(table).or_default();
+        c.add.extend(files);
+        c.episodes_added.extend(episodes);
+    }
+
+    pub fn remove_files(&mut self, table: TableKind, paths: Vec<String>, episodes: Vec<String>) {
+        let c = self.changes.entry(table).or_default();
+        c.remove.extend(paths);
+        c.episodes_removed.extend(episodes);
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.changes
+            .values()
+            .all(|c| c.add.is_empty() && c.remove.is_empty())
+    }
+
+    /// Deletes the files this transaction wrote (it will not be committed).
+    pub fn abort(self) {
+        for (t, c) in &self.changes {
+            for f in &c.add {
+                let _ = std::fs::remove_file(self.ds.table_root(*t).join(&f.path));
+            }
+        }
+    }
+
+    /// Checks that a version committed after our base does not clash with this change.
+    fn check_against(&self, other: &VersionEntry) -> Result<()> {
+        for (t, mine) in &self.changes {
+            let Some(theirs) = other.tables.get(t.name()) else {
+                continue;
+            };
+            let their_removed: BTreeSet<&String> = theirs.remove.iter().collect();
+            if let Some(p) = mine.remove.iter().find(|p| their_removed.contains(p)) {
+                return Err(Error::Conflict(format!(
+                    "file {p} of table {t} was already removed by version {}",
+                    other.version
+                )));
+            }
+            let their_added: BTreeSet<&String> = theirs.episodes_added.iter().collect();
+            if let Some(e) = mine.episodes_added.iter().find(|e| their_added.contains(e)) {
+                return Err(Error::Conflict(format!(
+                    "episode {e} was added to table {t} concurrently by version {}",
+                    other.version
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Publishes the change as the next dataset version and commits it to each table.
+    /// Returns the new version (or the base version if there was nothing to commit).
+    pub fn commit(self) -> Result<u64> {
+        if self.is_empty() {
+            return Ok(self.base);
+        }
+        let mut tables = BTreeMap::new();
+        for (t, c) in &self.changes {
+            tables.insert(t.name().to_string(), c.clone());
+        }
+        let mut checked = self.base;
+        let version = loop {
+            let latest = self.ds.latest_version()?;
+            for v in (checked + 1)..=latest {
+                let clash = self.ds.entry(v).and_then(|other| self.check_against(&other));
+                if let Err(e) = clash {
+                    self.abort();
+                    return Err(e);
+                }
+            }
+            checked = latest;
+            let entry = VersionEntry {
+                format: log::ENTRY_FORMAT.into(),
+                version: latest + 1,
+                parent: Some(self.base),
+                timestamp_ms: now_ms(),
+                meta: self.meta.clone(),
+                tables: tables.clone(),
+            };
+            if log::try_create_entry(&self.ds.root, &entry)? {
+                break entry.version;
+            }
+        };
+        // The version is durable now; the Delta commits below can be redone by anyone.
+        self.ds.roll_forward()?;
+        Ok(version)
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn references_parse() {
+        let r: DatasetRef = "data/ds@12".parse().unwrap();
+        assert_eq!(r.root, PathBuf::from("data/ds"));
+        assert_eq!(r.version, Some(12));
+        let r: DatasetRef = "data/user@host/ds".parse().unwrap();
+        assert_eq!(r.version, None);
+        assert_eq!(r.root, PathBuf::from("data/user@host/ds"));
+        let r: DatasetRef = "ds@".parse().unwrap();
+        assert_eq!(r.root, PathBuf::from("ds@"));
+        assert!("@3".parse::<DatasetRef>().is_err());
+        assert!("".parse::<DatasetRef>().is_err());
+        assert_eq!("a@3".parse::<DatasetRef>().unwrap().to_string(), "a@3");
+    }
+}

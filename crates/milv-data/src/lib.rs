@@ -1,0 +1,61 @@
+//! # milv-data — the MILV dataset store
+//!
+//! A dataset is a folder holding one [Delta Lake](https://delta.io) table per kind of row
+//! (`episodes`, `frames`, …; see [`schema`]) plus a dataset-level version log in
+//! `_milv/versions/`. Spark, Polars, DuckDB or pyarrow read the tables directly; MILV
+//! tools read them at a pinned dataset version.
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`schema`] | [`TableKind`], the column lists, Arrow schemas, the `schemas/v1` JSON |
+//! | [`rows`] | typed rows ([`Episode`]) and batch builders ([`FrameRows`]) |
+//! | [`dataset`] | [`Dataset`] (open `PATH` / `PATH@N`, list files, scan) and [`Transaction`] |
+//! | [`frame_codec`] | PNG / JPEG / raw encoding of the `image` column |
+//! | [`shard`] | [`ShardWriter`]: zstd Parquet files of bounded size, episode-aligned row groups |
+//! | [`log`] | the version log: [`VersionEntry`], [`CommitMeta`] (command line, tool version, input digests) |
+//! | [`ops`] | maintenance: info, verify, delete episodes, compact, vacuum |
+//!
+//! ## How a change becomes a version
+//! 1. A [`Transaction`] is planned against the latest version; its new Parquet files are
+//!    written (invisible: no table references them yet).
+//! 2. `commit()` atomically creates `_milv/versions/<N>.json`, naming the files each table
+//!    gains or loses. This is the commit point: the version exists from here on.
+//! 3. Each touched Delta table gets one commit carrying application transaction
+//!    `(milv, N)`; a writer that died before this step is completed by the next writer
+//!    (`roll_forward`), and the transaction id makes that idempotent.
+//!
+//! A crash before step 2 leaves only unreferenced files (removed by `vacuum`); the dataset
+//! stays at its last good version.
+//!
+//! ```
+//! use milv_data::{CommitMeta, Dataset, DatasetRef, TableKind};
+//! let dir = tempfile::tempdir().unwrap();
+//! let ds = Dataset::open_or_create(dir.path(), CommitMeta::for_this_process("doc", "create")).unwrap();
+//! assert_eq!(ds.latest_version().unwrap(), 0);
+//! assert!(ds.files(TableKind::Frames, 0).unwrap().is_empty());
+//! let r: DatasetRef = "data/robot@3".parse().unwrap();
+//! assert_eq!(r.version, Some(3));
+//! ```
+
+pub mod dataset;
+mod delta;
+pub mod error;
+pub mod frame_codec;
+pub mod log;
+pub mod ops;
+pub mod rows;
+pub mod schema;
+pub mod shard;
+
+pub use dataset::{Dataset, DatasetRef, TableFile, Transaction};
+pub use error::{Error, Result};
+pub use log::{CommitMeta, FileAdd, InputDigest, TableChange, VersionEntry};
+pub use rows::{Episode, FrameRows, episodes_from_batches, episodes_to_batch};
+pub use schema::{ColType, Column, SCHEMA_VERSION, TableKind};
+pub use shard::{ShardOptions, ShardWriter};
+
+/// Re-exported so callers use the exact Arrow/Parquet versions the tables are written with.
+pub use deltalake::{arrow, parquet};
+
+/// Version of the MILV tools, recorded in every commit.
+pub const TOOL_VERSION: &str = env!("CARGO_PKG_VERSION");

@@ -1,0 +1,226 @@
+//! The dataset-level version log: `_milv/versions/<N>.json`, one file per dataset version.
+//!
+//! An entry is the commit point of a change that may touch several tables: it is created
+//! atomically (write a temp file, then hard-link it to its final name, which fails if a
+//! concurrent writer took that number first) only after every data file it names is
+//! completely written. Each table then receives the entry as one Delta commit tagged with
+//! the application transaction `(milv, N)`, so applying an entry twice is a no-op and a
+//! crash between the two steps is repaired by the next writer ("roll forward").
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{Error, Result};
+
+/// Folder (under the dataset root) holding the version log.
+pub const LOG_DIR: &str = "_milv/versions";
+
+/// One data file added to a table by a version.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct FileAdd {
+    /// Path relative to the table root.
+    pub path: String,
+    pub size: u64,
+    pub num_records: u64,
+    /// Smallest and largest `episode_id` in the file (file skipping by episode).
+    pub min_episode: Option<String>,
+    pub max_episode: Option<String>,
+    pub modification_time_ms: i64,
+}
+
+/// What one version does to one table.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct TableChange {
+    #[serde(default)]
+    pub add: Vec<FileAdd>,
+    /// Paths (relative to the table root) of files this version removes.
+    #[serde(default)]
+    pub remove: Vec<String>,
+    /// Episodes whose rows this version adds to the table (for conflict checks and logs).
+    #[serde(default)]
+    pub episodes_added: Vec<String>,
+    /// Episodes whose rows this version removes from the table.
+    #[serde(default)]
+    pub episodes_removed: Vec<String>,
+}
+
+/// A digest of one input of a run (a video, a sidecar, a manifest).
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct InputDigest {
+    pub uri: String,
+    pub sha256: String,
+}
+
+/// Who made a version and why.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct CommitMeta {
+    /// Short operation name: create, ingest, delete-episodes, compact, ...
+    pub operation: String,
+    /// The command line, argument by argument.
+    pub command: Vec<String>,
+    pub tool: String,
+    pub tool_version: String,
+    #[serde(default)]
+    pub inputs: Vec<InputDigest>,
+    /// Free-form summary (counts, options).
+    #[serde(default)]
+    pub summary: serde_json::Value,
+}
+
+impl CommitMeta {
+    /// Metadata for a run of `tool` with this process's command line.
+    pub fn for_this_process(tool: &str, operation: &str) -> Self {
+        CommitMeta {
+            operation: operation.into(),
+            command: std::env::args().collect(),
+            tool: tool.into(),
+            tool_version: crate::TOOL_VERSION.into(),
+            inputs: Vec::new(),
+            summary: serde_json::Value::Null,
+        }
+    }
+}
+
+/// One dataset version.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct VersionEntry {
+    pub format: String,
+    pub version: u64,
+    /// The version this change was planned against.
+    pub parent: Option<u64>,
+    pub timestamp_ms: i64,
+    #[serde(flatten)]
+    pub meta: CommitMeta,
+    /// Table name -> change.
+    pub tables: BTreeMap<String, TableChange>,
+}
+
+pub(crate) const ENTRY_FORMAT: &str = "milv-version/1";
+
+pub(crate) fn log_dir(root: &Path) -> PathBuf {
+    root.join(LOG_DIR)
+}
+
+fn entry_path(root: &Path, version: u64) -> PathBuf {
+    log_dir(root).join(format!("{version:020}.json"))
+}
+
+/// All version numbers present in the log, ascending.
+pub(crate) fn list_versions(root: &Path) -> Result<Vec<u64>> {
+    let dir = log_dir(root);
+    let rd = match std::fs::read_dir(&dir) {
+        Ok(rd) => rd,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            return Err(Error::NotADataset(root.to_path_buf()));
+        }
+        Err(e) => return Err(Error::io("list versions", &dir)(e)),
+    };
+    let mut out = Vec::new();
+    for ent in rd {
+        let ent = ent.map_err(Error::io("list versions", &dir))?;
+        let name = ent.file_name();
+        let Some(name) = name.to_str() else { continue };
+        // Temp files start with '.', so only complete entries parse.
+        if let Some(stem) = name.strip_suffix(".json")
+            && stem.len() == 20
+            && let Ok(v) = stem.parse::<u64>()
+        {
+            out.push(v);
+        }
+    }
+    out.sort_unstable();
+    Ok(out)
+}
+
+pub(crate) fn read_entry(root: &Path, version: u64) -> Result<VersionEntry> {
+    let path = entry_path(root, version);
+    let bytes = std::fs::read(&path).map_err(Error::io("read version entry", &path))?;
+    let entry: VersionEntry = serde_json::from_slice(&bytes).map_err(|e| Error::BadLogEntry {
+        version,
+        msg: e.to_string(),
+        path: path.clone(),
+    })?;
+    if entry.version != version || entry.format != ENTRY_FORMAT {
+        return Err(Error::BadLogEntry {
+            version,
+            msg: format!("holds version {} in format {:?}", entry.version, entry.format),
+            path,
+        });
+    }
+    Ok(entry)
+}
+
+/// Atomically creates the entry for `entry.version`; `Ok(false)` if that number is taken.
+pub(crate) fn try_create_entry(root: &Path, entry: &VersionEntry) -> Result<bool> {
+    let dir = log_dir(root);
+    let tmp = dir.join(format!(".tmp-{}.json", uuid::Uuid::new_v4()));
+    let bytes = serde_json::to_vec_pretty(entry).map_err(|e| Error::Invalid(e.to_string()))?;
+    write_synced(&tmp, &bytes)?;
+    let target = entry_path(root, entry.version);
+    let created = match std::fs::hard_link(&tmp, &target) {
+        Ok(()) => true,
+        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => false,
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            return Err(Error::io("create version entry", &target)(e));
+        }
+    };
+    std::fs::remove_file(&tmp).map_err(Error::io("remove temp file", &tmp))?;
+    if created {
+        sync_dir(&dir)?;
+    }
+    Ok(created)
+}
+
+/// Writes a file and flushes it to disk, so a crash never leaves a named, partial file.
+pub(crate) fn write_synced(path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write;
+    let mut f = std::fs::File::create(path).map_err(Error::io("create", path))?;
+    f.write_all(bytes).map_err(Error::io("write", path))?;
+    f.sync_all().map_err(Error::io("sync", path))
+}
+
+pub(crate) fn sync_dir(dir: &Path) -> Result<()> {
+    std::fs::File::open(dir)
+        .and_then(|f| f.sync_all())
+        .map_err(Error::io("sync folder", dir))
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    fn entry(v: u64) -> VersionEntry {
+        VersionEntry {
+            format: ENTRY_FORMAT.into(),
+            version: v,
+            parent: v.checked_sub(1),
+            timestamp_ms: 1,
+            meta: CommitMeta::default(),
+            tables: BTreeMap::new(),
+        }
+    }
+
+    #[test]
+    fn entries_are_created_once() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir_all(log_dir(dir.path())).unwrap();
+        assert!(try_create_entry(dir.path(), &entry(0)).unwrap());
+        assert!(!try_create_entry(dir.path(), &entry(0)).unwrap());
+        assert!(try_create_entry(dir.path(), &entry(1)).unwrap());
+        assert_eq!(list_versions(dir.path()).unwrap(), vec![0, 1]);
+        assert_eq!(read_entry(dir.path(), 1).unwrap(), entry(1));
+        // No temp files left behind.
+        let names: Vec<_> = std::fs::read_dir(log_dir(dir.path())).unwrap().collect();
+        assert_eq!(names.len(), 2);
+    }
+
+    #[test]
+    fn missing_log_is_not_a_dataset() {
+        let dir = tempfile::tempdir().unwrap();
+        assert!(matches!(list_versions(dir.path()), Err(Error::NotADataset(_))));
+    }
+}

@@ -1,0 +1,750 @@
+//! The ingest pipeline: plan (sidecars, metadata, content ids), decode + encode in
+//! parallel across episodes, stream rows into shards, commit one version.
+
+use std::cell::Cell;
+use std::collections::{BTreeMap, BTreeSet};
+use std::io::Read as _;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+
+use milv_data::frame_codec::{self, FrameEncoding};
+use milv_data::{
+    CommitMeta, Dataset, Episode, FileAdd, FrameRows, InputDigest, ShardOptions, ShardWriter, TableKind,
+};
+use milv_video::{DecodeOptions, Frame, Resize};
+use rayon::prelude::*;
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+
+use crate::error::{Error, Result};
+use crate::manifest::InputSpec;
+use crate::sidecar::{self, EpisodeMeta, Sidecar};
+
+pub const DOMAINS: &[&str] = &["human", "robot"];
+pub const KINDS: &[&str] = &["demo", "random", "paired"];
+pub const SPLITS: &[&str] = &["train", "val", "test"];
+
+/// `i/n`: this worker takes every input whose position `p` has `p % n == i`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Partition {
+    pub index: u32,
+    pub count: u32,
+}
+
+impl FromStr for Partition {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        let (i, n) = s.split_once('/').ok_or_else(|| format!("{s:?} is not i/n"))?;
+        let index: u32 = i.trim().parse().map_err(|_| format!("{i:?} is not a number"))?;
+        let count: u32 = n.trim().parse().map_err(|_| format!("{n:?} is not a number"))?;
+        if count == 0 || index >= count {
+            return Err(format!("partition {index}/{count}: need 0 <= i < n"));
+        }
+        Ok(Partition { index, count })
+    }
+}
+
+/// How to ingest.
+#[derive(Clone, Debug)]
+pub struct IngestOptions {
+    /// Metadata for inputs whose sidecar/manifest line doesn't say.
+    pub defaults: EpisodeMeta,
+    pub resize: Option<Resize>,
+    /// Resample to this frame rate.
+    pub fps: Option<f64>,
+    pub encoding: FrameEncoding,
+    /// Episodes decoded at once (and threads encoding frames).
+    pub jobs: usize,
+    pub require_actions: bool,
+    pub shard: ShardOptions,
+    pub partition: Option<Partition>,
+}
+
+impl Default for IngestOptions {
+    fn default() -> Self {
+        IngestOptions {
+            defaults: EpisodeMeta::default(),
+            resize: None,
+            fps: None,
+            encoding: FrameEncoding::Png,
+            jobs: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            require_actions: false,
+            shard: ShardOptions::default(),
+            partition: None,
+        }
+    }
+}
+
+/// Hooks for a progress display; the library prints nothing itself.
+pub trait Progress: Sync {
+    /// The run will decode `episodes` episodes, about `frames` frames (0 if unknown).
+    fn planned(&self, _episodes: usize, _frames: u64) {}
+    fn frames_done(&self, _n: u64) {}
+    fn episode_done(&self, _source: &Path, _ok: bool) {}
+}
+
+/// A [`Progress`] that shows nothing.
+pub struct NoProgress;
+impl Progress for NoProgress {}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Ingested {
+    pub episode_id: String,
+    pub source: String,
+    pub n_frames: i64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Skipped {
+    pub source: String,
+    pub episode_id: String,
+    pub reason: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Failed {
+    pub source: String,
+    pub error: String,
+}
+
+/// What an ingest run did (the `--json` output).
+#[derive(Clone, Debug, Serialize)]
+pub struct IngestReport {
+    pub dataset: String,
+    /// The dataset version after the run (unchanged if nothing new landed).
+    pub version: u64,
+    pub base_version: u64,
+    pub ingested: Vec<Ingested>,
+    pub skipped: Vec<Skipped>,
+    pub failed: Vec<Failed>,
+    pub frames: u64,
+}
+
+impl IngestReport {
+    pub fn all_ok(&self) -> bool {
+        self.failed.is_empty()
+    }
+}
+
+/// Metadata of an episode after layering and validation.
+#[derive(Clone, Debug, Serialize)]
+struct Resolved {
+    domain: String,
+    kind: String,
+    task_id: Option<String>,
+    task_family: Option<String>,
+    pair_id: Option<String>,
+    split: String,
+    /// Frame rate of a frame folder.
+    folder_fps: Option<f64>,
+}
+
+struct Planned {
+    source: PathBuf,
+    sidecar: Option<Sidecar>,
+    sidecar_sha256: Option<String>,
+    meta: Resolved,
+    source_sha256: String,
+    episode_id: String,
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn sha256_file(path: &Path, h: &mut Sha256) -> Result<()> {
+    let mut f = std::fs::File::open(path).map_err(|e| Error::Io {
+        op: "open",
+        source: e,
+        path: path.to_path_buf(),
+    })?;
+    let mut buf = vec![0u8; 1 << 20];
+    loop {
+        let n = f.read(&mut buf).map_err(|e| Error::Io {
+            op: "read",
+            source: e,
+            path: path.to_path_buf(),
+        })?;
+        if n == 0 {
+            return Ok(());
+        }
+        h.update(&buf[..n]);
+    }
+}
+
+/// sha256 of a video file, or of a frame folder's files (names and bytes, in frame order).
+pub fn source_digest(path: &Path) -> Result<String> {
+    let mut h = Sha256::new();
+    if path.is_dir() {
+        for f in milv_video::list_numbered_frames(path)? {
+            h.update(f.file_name().map(|n| n.as_encoded_bytes()).unwrap_or_default());
+            h.update([0]);
+            sha256_file(&f, &mut h)?;
+        }
+    } else {
+        let meta = std::fs::metadata(path).map_err(|e| Error::Io {
+            op: "read",
+            source: e,
+            path: path.to_path_buf(),
+        })?;
+        if meta.len() == 0 {
+            return Err(Error::input(path, "empty file (0 bytes)"));
+        }
+        sha256_file(path, &mut h)?;
+    }
+    Ok(hex(&h.finalize()))
+}
+
+fn check_choice(path: &Path, what: &str, v: &str, allowed: &[&str]) -> Result<()> {
+    if allowed.contains(&v) {
+        Ok(())
+    } else {
+        Err(Error::input(
+            path,
+            format!("unknown {what} {v:?} (expected one of {})", allowed.join(", ")),
+        ))
+    }
+}
+
+fn resolve_meta(spec: &InputSpec, sidecar: Option<&Sidecar>, defaults: &EpisodeMeta) -> Result<Resolved> {
+    let side = sidecar.map(|s| s.meta.clone()).unwrap_or_default();
+    let m = spec.meta.clone().over(&side.over(defaults));
+    let p = &spec.path;
+    let domain = m
+        .domain
+        .ok_or_else(|| Error::input(p, "no domain (give --domain, a sidecar or a manifest column)"))?;
+    check_choice(p, "domain", &domain, DOMAINS)?;
+    let kind = m.kind.unwrap_or_else(|| "demo".into());
+    check_choice(p, "kind", &kind, KINDS)?;
+    let split = m.split.unwrap_or_else(|| "train".into());
+    check_choice(p, "split", &split, SPLITS)?;
+    if let Some(f) = m.fps
+        && !(f.is_finite() && f > 0.0)
+    {
+        return Err(Error::input(p, format!("fps {f} is not a positive number")));
+    }
+    Ok(Resolved {
+        domain,
+        kind,
+        task_id: m.task_id,
+        task_family: m.task_family,
+        pair_id: m.pair_id,
+        split,
+        folder_fps: m.fps,
+    })
+}
+
+fn plan_one(spec: &InputSpec, opts: &IngestOptions) -> Result<Planned> {
+    let path = &spec.path;
+    // symlink_metadata first so a dangling link is reported as such.
+    std::fs::metadata(path).map_err(|e| Error::Io {
+        op: "cannot read input",
+        source: e,
+        path: path.clone(),
+    })?;
+    let sidecar_path = spec.sidecar.clone().or_else(|| sidecar::discover(path));
+    let (sidecar, sidecar_sha256) = match &sidecar_path {
+        Some(sp) => {
+            let s = sidecar::read(sp)?;
+            (Some(s), Some(source_digest(sp)?))
+        }
+        None => (None, None),
+    };
+    if opts.require_actions && sidecar.as_ref().and_then(|s| s.actions.as_ref()).is_none() {
+        return Err(Error::input(
+            path,
+            "--require-actions: no sidecar with actions (looked for <stem>.json / <stem>.csv)",
+        ));
+    }
+    let meta = resolve_meta(spec, sidecar.as_ref(), &opts.defaults)?;
+    if path.is_dir() && meta.folder_fps.is_none() {
+        return Err(Error::input(
+            path,
+            "a frame folder needs --fps or an fps in its sidecar",
+        ));
+    }
+    let source_sha256 = source_digest(path)?;
+    // The id covers everything that changes the rows: source, sidecar, metadata, options.
+    let mut h = Sha256::new();
+    h.update(b"milv-episode/1\0");
+    h.update(source_sha256.as_bytes());
+    h.update(sidecar_sha256.as_deref().unwrap_or("-").as_bytes());
+    let options = serde_json::json!({
+        "meta": meta,
+        "resize": opts.resize.map(|r| format!("{}x{}:{}", r.width, r.height, r.policy)),
+        "fps": opts.fps,
+        "encoding": opts.encoding.name(),
+        "jpeg_quality": match opts.encoding { FrameEncoding::Jpeg { quality } => Some(quality), _ => None },
+    });
+    h.update(options.to_string().as_bytes());
+    let episode_id = hex(&h.finalize())[..32].to_string();
+    Ok(Planned {
+        source: path.clone(),
+        sidecar,
+        sidecar_sha256,
+        meta,
+        source_sha256,
+        episode_id,
+    })
+}
+
+const ENCODE_CHUNK: usize = 16;
+const BATCH_BYTES: usize = 8 << 20;
+
+struct EpisodeState<'a> {
+    p: &'a Planned,
+    enc: FrameEncoding,
+    rows: FrameRows,
+    n: i64,
+    size: Option<(u32, u32)>,
+    last_ts: i64,
+}
+
+impl EpisodeState<'_> {
+    fn row(table: Option<&Vec<Vec<f32>>>, i: u64) -> Option<&[f32]> {
+        table.and_then(|t| t.get(i as usize)).map(Vec::as_slice)
+    }
+
+    fn flush_chunk(
+        &mut self,
+        chunk: &mut Vec<Frame>,
+        w: &mut ShardWriter,
+        progress: &dyn Progress,
+    ) -> Result<()> {
+        let enc = self.enc;
+        let encoded: Vec<std::result::Result<Vec<u8>, frame_codec::CodecError>> = chunk
+            .par_iter()
+            .map(|f| {
+                let mut buf = Vec::new();
+                frame_codec::encode(enc, &f.data, f.width, f.height, &mut buf).map(|()| buf)
+            })
+            .collect();
+        let side = self.p.sidecar.as_ref();
+        let count = chunk.len() as u64;
+        for (f, bytes) in chunk.drain(..).zip(encoded) {
+            let bytes = bytes.map_err(|e| Error::Frame {
+                index: f.source_index,
+                msg: format!("encode: {e}"),
+                path: self.p.source.clone(),
+            })?;
+            let action = Self::row(side.and_then(|s| s.actions.as_ref()), f.source_index);
+            let state = Self::row(side.and_then(|s| s.states.as_ref()), f.source_index);
+            self.rows
+                .push(&self.p.episode_id, self.n as i32, f.pts_ns, &bytes, action, state);
+            self.n += 1;
+            self.last_ts = f.pts_ns;
+            if self.rows.buffered_bytes() >= BATCH_BYTES {
+                w.push(self.rows.finish()?)?;
+            }
+        }
+        progress.frames_done(count);
+        Ok(())
+    }
+}
+
+fn count_check(p: &Planned, what: &str, rows: Option<usize>, frames: u64) -> Result<()> {
+    match rows {
+        Some(r) if r as u64 != frames => Err(Error::input(
+            p.sidecar.as_ref().map_or(&p.source, |s| &s.path),
+            format!(
+                "{r} {what} rows for {frames} video frames (need one row per frame of {})",
+                p.source.display()
+            ),
+        )),
+        _ => Ok(()),
+    }
+}
+
+fn ingest_one(
+    p: &Planned,
+    opts: &IngestOptions,
+    decoder_threads: usize,
+    w: &mut ShardWriter,
+    progress: &dyn Progress,
+) -> Result<Episode> {
+    let dopts = DecodeOptions {
+        resize: opts.resize,
+        fps: None,
+        threads: decoder_threads,
+    };
+    let source = milv_video::open_frames(&p.source, p.meta.folder_fps, &dopts)?;
+    let info = source.info().clone();
+    let decoded = Cell::new(0u64);
+    let counted = source.inspect(|f| {
+        if let Ok(f) = f {
+            decoded.set(decoded.get().max(f.source_index + 1));
+        }
+    });
+    let frames: Box<dyn Iterator<Item = Result<Frame, milv_video::Error>>> = match opts.fps {
+        Some(fps) => Box::new(milv_video::Resample::new(counted, fps)?),
+        None => Box::new(counted),
+    };
+    let side = p.sidecar.as_ref();
+    let n_actions = side.and_then(|s| s.actions.as_ref()).map(Vec::len);
+    let n_states = side.and_then(|s| s.states.as_ref()).map(Vec::len);
+    let mut st = EpisodeState {
+        p,
+        enc: opts.encoding,
+        rows: FrameRows::new(),
+        n: 0,
+        size: None,
+        last_ts: 0,
+    };
+    let mut chunk = Vec::with_capacity(ENCODE_CHUNK);
+    w.begin_episode()?;
+    for f in frames {
+        let f = f?;
+        let size = (f.width, f.height);
+        if *st.size.get_or_insert(size) != size {
+            return Err(Error::Frame {
+                index: f.source_index,
+                msg: format!("frame size changed from {:?} to {size:?} (use --resize)", st.size),
+                path: p.source.clone(),
+            });
+        }
+        // Fail early rather than after decoding a long clip.
+        for (what, n) in [("action", n_actions), ("state", n_states)] {
+            if let Some(n) = n
+                && f.source_index as usize >= n
+            {
+                return Err(Error::input(
+                    side.map_or(&p.source, |s| &s.path),
+                    format!(
+                        "{n} {what} rows for at least {} video frames (need one row per frame of {})",
+                        f.source_index + 1,
+                        p.source.display()
+                    ),
+                ));
+            }
+        }
+        chunk.push(f);
+        if chunk.len() == ENCODE_CHUNK {
+            st.flush_chunk(&mut chunk, w, progress)?;
+        }
+    }
+    st.flush_chunk(&mut chunk, w, progress)?;
+    let frames_decoded = decoded.get();
+    if st.n == 0 {
+        return Err(Error::input(&p.source, "no decodable frames"));
+    }
+    count_check(p, "action", n_actions, frames_decoded)?;
+    count_check(p, "state", n_states, frames_decoded)?;
+    if !st.rows.is_empty() {
+        w.push(st.rows.finish()?)?;
+    }
+    w.end_episode()?;
+    let (width, height) = st.size.unwrap_or((0, 0));
+    let fps = opts
+        .fps
+        .or(p.meta.folder_fps.filter(|_| p.source.is_dir()))
+        .filter(|f| *f > 0.0)
+        .unwrap_or_else(|| {
+            if info.fps > 0.0 {
+                info.fps
+            } else if st.n > 1 && st.last_ts > 0 {
+                (st.n - 1) as f64 * 1e9 / st.last_ts as f64
+            } else {
+                0.0
+            }
+        });
+    let period = if fps > 0.0 { (1e9 / fps).round() as i64 } else { 0 };
+    Ok(Episode {
+        episode_id: p.episode_id.clone(),
+        domain: p.meta.domain.clone(),
+        kind: p.meta.kind.clone(),
+        task_id: p.meta.task_id.clone(),
+        task_family: p.meta.task_family.clone(),
+        pair_id: p.meta.pair_id.clone(),
+        split: p.meta.split.clone(),
+        n_frames: st.n,
+        fps,
+        width: width as i32,
+        height: height as i32,
+        frame_encoding: opts.encoding.name().into(),
+        action_dim: side
+            .and_then(|s| s.actions.as_ref())
+            .and_then(|a| a.first())
+            .map(|r| r.len() as i32),
+        state_dim: side
+            .and_then(|s| s.states.as_ref())
+            .and_then(|a| a.first())
+            .map(|r| r.len() as i32),
+        action_names: side.and_then(|s| s.action_names.clone()),
+        state_names: side.and_then(|s| s.state_names.clone()),
+        source_uri: p.source.display().to_string(),
+        source_sha256: p.source_sha256.clone(),
+        sidecar_uri: side.map(|s| s.path.display().to_string()),
+        duration_ns: st.last_ts + period,
+        ingested_at_us: now_us(),
+    })
+}
+
+fn now_us() -> i64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_micros() as i64)
+}
+
+fn source_name(p: &Path) -> String {
+    p.display().to_string()
+}
+
+/// Ingests `inputs` into `ds` as one new version. Bad inputs are reported in the result and
+/// skipped; the others land. Errors only for problems with the dataset itself.
+pub fn ingest(
+    ds: &Dataset,
+    inputs: &[InputSpec],
+    opts: &IngestOptions,
+    meta: CommitMeta,
+    progress: &dyn Progress,
+) -> Result<IngestReport> {
+    // A concurrent writer adding the same episode makes our commit conflict; the retry
+    // then sees that episode as present and skips it.
+    let mut attempt = 0;
+    loop {
+        match ingest_attempt(ds, inputs, opts, meta.clone(), progress) {
+            Err(Error::Data(milv_data::Error::Conflict(_))) if attempt < 3 => attempt += 1,
+            other => return other,
+        }
+    }
+}
+
+fn ingest_attempt(
+    ds: &Dataset,
+    inputs: &[InputSpec],
+    opts: &IngestOptions,
+    meta: CommitMeta,
+    progress: &dyn Progress,
+) -> Result<IngestReport> {
+    let mut txn = ds.begin(meta)?;
+    let base = txn.base_version();
+    let existing: BTreeSet<String> = milv_data::ops::episodes(ds, base)?
+        .into_iter()
+        .map(|e| e.episode_id)
+        .collect();
+    let mut report = IngestReport {
+        dataset: ds.root().display().to_string(),
+        version: base,
+        base_version: base,
+        ingested: Vec::new(),
+        skipped: Vec::new(),
+        failed: Vec::new(),
+        frames: 0,
+    };
+    let selected: Vec<&InputSpec> = inputs
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| {
+            opts.partition
+                .is_none_or(|p| *i as u64 % p.count as u64 == p.index as u64)
+        })
+        .map(|(_, s)| s)
+        .collect();
+    let plans: Vec<Result<Planned>> = selected.par_iter().map(|s| plan_one(s, opts)).collect();
+    let mut todo = Vec::new();
+    let mut in_batch: BTreeMap<String, PathBuf> = BTreeMap::new();
+    for (spec, plan) in selected.iter().zip(plans) {
+        match plan {
+            Err(e) => report.failed.push(Failed {
+                source: source_name(&spec.path),
+                error: e.to_string(),
+            }),
+            Ok(p) if existing.contains(&p.episode_id) => report.skipped.push(Skipped {
+                source: source_name(&p.source),
+                episode_id: p.episode_id,
+                reason: format!("already in the dataset at version {base}"),
+            }),
+            Ok(p) => {
+                if let Some(first) = in_batch.get(&p.episode_id) {
+                    report.failed.push(Failed {
+                        source: source_name(&p.source),
+                        error: format!(
+                            "duplicate episode {} (same content and options as {}): {}",
+                            p.episode_id,
+                            first.display(),
+                            p.source.display()
+                        ),
+                    });
+                } else {
+                    in_batch.insert(p.episode_id.clone(), p.source.clone());
+                    todo.push(p);
+                }
+            }
+        }
+    }
+    progress.planned(todo.len(), 0);
+
+    let jobs = opts.jobs.max(1);
+    let workers = jobs.min(todo.len()).max(1);
+    let decoder_threads = (jobs / workers).max(1);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs)
+        .build()
+        .map_err(|e| Error::input(ds.root(), format!("thread pool: {e}")))?;
+    let mut writers = Vec::with_capacity(workers);
+    for _ in 0..workers {
+        writers.push(txn.shard_writer(TableKind::Frames, opts.shard.clone())?);
+    }
+    let (tx, rx) = crossbeam_channel::unbounded::<&Planned>();
+    for p in &todo {
+        // Unbounded is fine: the channel holds references, not frames.
+        let _ = tx.send(p);
+    }
+    drop(tx);
+    type Outcome<'p> = (&'p Planned, Result<Episode>);
+    let results: Vec<(Result<Vec<FileAdd>>, Vec<Outcome<'_>>)> = std::thread::scope(|s| {
+        let handles: Vec<_> = writers
+            .into_iter()
+            .map(|mut w| {
+                let rx = rx.clone();
+                let pool = &pool;
+                s.spawn(move || {
+                    let mut outcomes = Vec::new();
+                    for p in rx.iter() {
+                        let r = pool.install(|| ingest_one(p, opts, decoder_threads, &mut w, progress));
+                        if r.is_err() {
+                            w.abort_episode();
+                        }
+                        progress.episode_done(&p.source, r.is_ok());
+                        outcomes.push((p, r));
+                    }
+                    (w.finish().map_err(Error::from), outcomes)
+                })
+            })
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| {
+                h.join().unwrap_or_else(|_| {
+                    (
+                        Err(Error::input(ds.root(), "an ingest worker panicked")),
+                        Vec::new(),
+                    )
+                })
+            })
+            .collect()
+    });
+
+    let mut frame_files = Vec::new();
+    let mut episodes = Vec::new();
+    let mut digests = Vec::new();
+    let mut fatal = None;
+    for (files, outcomes) in results {
+        match files {
+            Ok(f) => frame_files.extend(f),
+            Err(e) => fatal = Some(e),
+        }
+        for (p, r) in outcomes {
+            match r {
+                Ok(ep) => {
+                    digests.push(InputDigest {
+                        uri: source_name(&p.source),
+                        sha256: p.source_sha256.clone(),
+                    });
+                    if let (Some(s), Some(sha)) = (&p.sidecar, &p.sidecar_sha256) {
+                        digests.push(InputDigest {
+                            uri: source_name(&s.path),
+                            sha256: sha.clone(),
+                        });
+                    }
+                    report.frames += ep.n_frames as u64;
+                    report.ingested.push(Ingested {
+                        episode_id: ep.episode_id.clone(),
+                        source: source_name(&p.source),
+                        n_frames: ep.n_frames,
+                    });
+                    episodes.push(ep);
+                }
+                Err(e) => report.failed.push(Failed {
+                    source: source_name(&p.source),
+                    error: e.to_string(),
+                }),
+            }
+        }
+    }
+    let ids: Vec<String> = episodes.iter().map(|e| e.episode_id.clone()).collect();
+    txn.add_files(TableKind::Frames, frame_files, ids.clone());
+    if let Some(e) = fatal {
+        txn.abort();
+        return Err(e);
+    }
+    if episodes.is_empty() {
+        txn.abort();
+        return Ok(report);
+    }
+    let ep_files = match write_episodes(&txn, &episodes) {
+        Ok(f) => f,
+        Err(e) => {
+            txn.abort();
+            return Err(e);
+        }
+    };
+    txn.add_files(TableKind::Episodes, ep_files, ids);
+    let m = txn.meta_mut();
+    m.inputs = digests;
+    m.summary = serde_json::json!({
+        "ingested": report.ingested.len(),
+        "skipped": report.skipped.len(),
+        "failed": report.failed.len(),
+        "frames": report.frames,
+        "frame_encoding": opts.encoding.name(),
+        "resize": opts.resize.map(|r| format!("{}x{}:{}", r.width, r.height, r.policy)),
+        "fps": opts.fps,
+        "partition": opts.partition.map(|p| format!("{}/{}", p.index, p.count)),
+    });
+    report.version = txn.commit()?;
+    Ok(report)
+}
+
+fn write_episodes(txn: &milv_data::Transaction<'_>, episodes: &[Episode]) -> Result<Vec<FileAdd>> {
+    let batch = milv_data::episodes_to_batch(episodes)?;
+    let mut w = txn.shard_writer(TableKind::Episodes, ShardOptions::default())?;
+    for i in 0..episodes.len() {
+        w.begin_episode()?;
+        w.push(batch.slice(i, 1))?;
+        w.end_episode()?;
+    }
+    Ok(w.finish()?)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn partitions_parse() {
+        assert_eq!(
+            "1/4".parse::<Partition>().unwrap(),
+            Partition { index: 1, count: 4 }
+        );
+        assert!("4/4".parse::<Partition>().is_err());
+        assert!("1".parse::<Partition>().is_err());
+        assert!("0/0".parse::<Partition>().is_err());
+    }
+
+    #[test]
+    fn metadata_is_validated() {
+        let spec = InputSpec::new("x.mp4");
+        let mut d = EpisodeMeta {
+            domain: Some("alien".into()),
+            ..Default::default()
+        };
+        let e = resolve_meta(&spec, None, &d).unwrap_err().to_string();
+        assert!(
+            e.contains("unknown domain \"alien\"") && e.contains("x.mp4"),
+            "{e}"
+        );
+        d.domain = None;
+        assert!(
+            resolve_meta(&spec, None, &d)
+                .unwrap_err()
+                .to_string()
+                .contains("no domain")
+        );
+        d.domain = Some("human".into());
+        let r = resolve_meta(&spec, None, &d).unwrap();
+        assert_eq!((r.kind.as_str(), r.split.as_str()), ("demo", "train"));
+    }
+}

@@ -1,0 +1,22 @@
+//! # milv-ingest — human and robot videos into the `episodes` and `frames` tables
+//!
+//! | module | what it holds |
+//! |---|---|
+//! | [`ingest`] | [`ingest()`](ingest::ingest): plan, decode/encode in parallel, commit one version; [`IngestOptions`], [`IngestReport`] |
+//! | [`sidecar`] | per-episode action/state sidecars (JSON `milv-sidecar/1`, CSV) and [`EpisodeMeta`] |
+//! | [`manifest`] | many inputs at once (JSON lines or CSV): [`InputSpec`] |
+//! | [`error`] | [`Error`]: every message names the file it is about |
+//!
+//! Episode ids are content hashes of the source bytes, the sidecar bytes, the metadata and
+//! the options, so ingesting the same inputs again is a no-op. A failing input is reported
+//! and skipped; the others land in one new dataset version.
+
+pub mod error;
+pub mod ingest;
+pub mod manifest;
+pub mod sidecar;
+
+pub use error::{Error, Result};
+pub use ingest::{IngestOptions, IngestReport, NoProgress, Partition, Progress, ingest};
+pub use manifest::InputSpec;
+pub use sidecar::{EpisodeMeta, Sidecar};

@@ -1,0 +1,212 @@
+//! `milv-ingest`: turn human and robot videos (+ action sidecars) into dataset episodes.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context as _, bail};
+use clap::{Parser, ValueEnum};
+use indicatif::ProgressBar;
+use milv::cli;
+use milv::data::frame_codec::FrameEncoding;
+use milv::data::{CommitMeta, Dataset, ShardOptions};
+use milv::ingest::{EpisodeMeta, IngestOptions, InputSpec, Partition, Progress};
+use milv::video::{AspectPolicy, Resize};
+
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum Encoding {
+    Png,
+    Jpeg,
+    Raw,
+}
+
+/// Ingest videos or frame folders into a versioned MILV dataset.
+///
+/// Every input becomes one episode: its frames (decoded with FFmpeg, stored PNG by default)
+/// go to the `frames` table, one row per episode to `episodes`. Actions and states come
+/// from a sidecar beside each input (`<stem>.json` or `<stem>.csv`, see
+/// schemas/sidecar.md). The whole run is one new dataset version; inputs that fail are
+/// reported and skipped (exit code 3), the rest still land. Running the same command again
+/// changes nothing: episode ids are content hashes of the inputs and options.
+#[derive(Parser, Debug)]
+#[command(
+    version,
+    after_help = "Examples:\n  milv-ingest data/ds clips/*.mp4 --domain human --task draw/circle\n  milv-ingest data/ds --manifest samples/manifest.jsonl --json\n  milv-ingest data/ds frames_dir/ --fps 10 --domain robot --kind random"
+)]
+struct Args {
+    /// Dataset folder (created if missing).
+    dataset: PathBuf,
+    /// Video files or folders of numbered PNG/JPEG frames.
+    inputs: Vec<PathBuf>,
+    /// A manifest listing many inputs (JSON lines or CSV; keys: path, sidecar, domain, kind, task_id, task_family, pair_id, split, fps).
+    #[arg(long)]
+    manifest: Option<PathBuf>,
+    /// Sidecar for the (single) input, instead of looking beside it.
+    #[arg(long)]
+    sidecar: Option<PathBuf>,
+    /// Embodiment, for inputs whose sidecar/manifest doesn't say.
+    #[arg(long, value_parser = ["human", "robot"])]
+    domain: Option<String>,
+    /// Episode kind (default: demo).
+    #[arg(long, value_parser = ["demo", "random", "paired"])]
+    kind: Option<String>,
+    /// Task id, e.g. draw/circle.
+    #[arg(long)]
+    task: Option<String>,
+    /// Task family, e.g. drawing or pushing.
+    #[arg(long)]
+    task_family: Option<String>,
+    /// Pair id linking a human and a robot clip of the same motion.
+    #[arg(long)]
+    pair_id: Option<String>,
+    /// Split (default: train).
+    #[arg(long, value_parser = ["train", "val", "test"])]
+    split: Option<String>,
+    /// Frame rate: required for frame folders; for videos, resample to this rate
+    /// (frames are dropped or repeated; each keeps its source frame's action).
+    #[arg(long)]
+    fps: Option<f64>,
+    /// Resize every frame to WxH (see --aspect).
+    #[arg(long, value_name = "WxH")]
+    resize: Option<Resize>,
+    /// Aspect-ratio policy for --resize: pad (letterbox, keeps everything), crop (fill,
+    /// centre crop) or stretch.
+    #[arg(long, default_value = "pad")]
+    aspect: AspectPolicy,
+    /// How frames are stored.
+    #[arg(long, value_enum, default_value = "png")]
+    frame_encoding: Encoding,
+    /// JPEG quality for --frame-encoding jpeg.
+    #[arg(long, default_value_t = 90, value_parser = clap::value_parser!(u8).range(1..=100))]
+    jpeg_quality: u8,
+    /// Parallel episodes and encoder threads (default: all cores).
+    #[arg(long, short)]
+    jobs: Option<usize>,
+    /// Fail inputs that have no sidecar with actions.
+    #[arg(long)]
+    require_actions: bool,
+    /// Target Parquet shard size in MiB.
+    #[arg(long, default_value_t = 128)]
+    shard_mb: u64,
+    /// Take only every n-th input starting at i (for array jobs): i/n.
+    #[arg(long)]
+    partition: Option<Partition>,
+    /// Print a JSON summary on stdout.
+    #[arg(long)]
+    json: bool,
+}
+
+struct Bars {
+    frames: ProgressBar,
+}
+
+impl Progress for Bars {
+    fn planned(&self, episodes: usize, _frames: u64) {
+        self.frames.set_length(episodes as u64);
+        self.frames.set_message("episodes");
+    }
+    fn frames_done(&self, _n: u64) {
+        self.frames.tick();
+    }
+    fn episode_done(&self, _source: &std::path::Path, _ok: bool) {
+        self.frames.inc(1);
+    }
+}
+
+fn run(args: Args) -> anyhow::Result<u8> {
+    let mut inputs: Vec<InputSpec> = args.inputs.iter().map(InputSpec::new).collect();
+    if let Some(m) = &args.manifest {
+        inputs.extend(milv::ingest::manifest::read(m)?);
+    }
+    if inputs.is_empty() {
+        bail!("no inputs: give video files / frame folders or --manifest");
+    }
+    if let Some(s) = &args.sidecar {
+        if inputs.len() != 1 {
+            bail!("--sidecar needs exactly one input, got {}", inputs.len());
+        }
+        inputs[0].sidecar = Some(s.clone());
+    }
+    let is_folder_input = args.inputs.iter().any(|p| p.is_dir());
+    let encoding = match args.frame_encoding {
+        Encoding::Png => FrameEncoding::Png,
+        Encoding::Jpeg => FrameEncoding::Jpeg {
+            quality: args.jpeg_quality,
+        },
+        Encoding::Raw => FrameEncoding::Raw,
+    };
+    let opts = IngestOptions {
+        defaults: EpisodeMeta {
+            domain: args.domain,
+            kind: args.kind,
+            task_id: args.task,
+            task_family: args.task_family,
+            pair_id: args.pair_id,
+            split: args.split,
+            // For frame folders --fps is their rate, not a resampling target.
+            fps: args.fps,
+        },
+        resize: args.resize.map(|r| Resize {
+            policy: args.aspect,
+            ..r
+        }),
+        fps: if is_folder_input { None } else { args.fps },
+        encoding,
+        jobs: args
+            .jobs
+            .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())),
+        require_actions: args.require_actions,
+        shard: ShardOptions {
+            target_file_bytes: args.shard_mb << 20,
+            ..ShardOptions::default()
+        },
+        partition: args.partition,
+    };
+    let ds = Dataset::open_or_create(
+        &args.dataset,
+        CommitMeta::for_this_process("milv-ingest", "create"),
+    )
+    .with_context(|| format!("opening dataset {}", args.dataset.display()))?;
+    let bars = Bars {
+        frames: cli::bar(0, "planning"),
+    };
+    let report = milv::ingest::ingest(
+        &ds,
+        &inputs,
+        &opts,
+        CommitMeta::for_this_process("milv-ingest", "ingest"),
+        &bars,
+    )?;
+    bars.frames.finish_and_clear();
+    if args.json {
+        cli::print_json(&report)?;
+    } else {
+        for f in &report.failed {
+            eprintln!("error: {}", f.error);
+        }
+        println!(
+            "{}@{}: ingested {} episodes ({} frames), skipped {} already present, {} failed",
+            report.dataset,
+            report.version,
+            report.ingested.len(),
+            report.frames,
+            report.skipped.len(),
+            report.failed.len()
+        );
+    }
+    Ok(if report.all_ok() {
+        cli::EXIT_OK
+    } else {
+        cli::EXIT_PARTIAL
+    })
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    match run(args) {
+        Ok(code) => ExitCode::from(code),
+        Err(e) => {
+            eprintln!("milv-ingest: error: {e:#}");
+            ExitCode::from(cli::EXIT_FATAL)
+        }
+    }
+}

@@ -1,0 +1,18 @@
+//! # milv — meta-imitation learning from human videos: the toolkit
+//!
+//! This package holds the command-line tools (`src/bin/milv-*.rs`, each a thin `clap`
+//! front over one library call) and re-exports the libraries they stand on:
+//!
+//! | crate | role |
+//! |---|---|
+//! | [`data`] (`milv-data`) | versioned dataset store: schemas, Delta tables, Parquet shards, maintenance |
+//! | [`video`] (`milv-video`) | FFmpeg decode/encode to RGB frames with timestamps, frame folders, resizing |
+//! | [`ingest`] (`milv-ingest`) | videos + sidecars into the `episodes` and `frames` tables |
+//!
+//! [`cli`] holds what the binaries share (progress bars, exit codes).
+
+pub use milv_data as data;
+pub use milv_ingest as ingest;
+pub use milv_video as video;
+
+pub mod cli;

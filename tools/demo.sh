@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# The whole pipeline on the bundled samples: ingest human and robot clips with their
+# action sidecars, then inspect and verify the dataset. Prints where everything is.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+tools/setup.sh
+
+BIN=target/debug
+OUT=${MILV_DEMO_OUT:-out/demo}
+DS="$OUT/dataset"
+rm -rf "$OUT"
+mkdir -p "$OUT"
+
+echo "== milv-ingest: bundled samples (samples/manifest.jsonl)"
+"$BIN/milv-ingest" "$DS" --manifest samples/manifest.jsonl
+echo "== milv-ingest again: a no-op (episode ids are content hashes)"
+"$BIN/milv-ingest" "$DS" --manifest samples/manifest.jsonl
+echo "== milv-ds info"
+"$BIN/milv-ds" info "$DS"
+echo "== milv-ds log"
+"$BIN/milv-ds" log "$DS"
+echo "== milv-ds verify"
+"$BIN/milv-ds" verify "$DS"
+
+cat <<TXT
+
+Outputs:
+  dataset           $DS   (Delta tables: $DS/episodes, $DS/frames; version log: $DS/_milv/versions)
+  read it elsewhere .venv/bin/python -c "import polars as pl; print(pl.read_delta('$DS/frames').head())"
+TXT

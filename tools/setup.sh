@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# Installs everything MILV needs on a fresh Debian 12 machine, then builds.
+# Idempotent: each step checks before it installs. Nothing else is assumed by hand.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+log() { printf '\033[1msetup:\033[0m %s\n' "$*" >&2; }
+
+# System packages: FFmpeg development files (ffmpeg-next), clang (bindgen), the ffmpeg CLI
+# (sample generation, benchmarks), GNU time (peak RSS in benchmarks).
+APT_PACKAGES=(pkg-config clang libclang-dev libavcodec-dev libavformat-dev libavutil-dev
+  libswscale-dev libswresample-dev libavfilter-dev libavdevice-dev ffmpeg time python3-venv)
+missing=()
+for p in "${APT_PACKAGES[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  log "apt-get install ${missing[*]}"
+  SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+# Python packages for interop tests and benchmarks, pinned, in a project-local venv.
+VENV=.venv
+if [ ! -x "$VENV/bin/python" ]; then
+  log "creating $VENV"
+  python3 -m venv "$VENV"
+fi
+stamp="$VENV/.requirements.sha256"
+want=$(sha256sum tools/requirements*.txt | sha256sum | cut -d' ' -f1)
+if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
+  log "pip install -r tools/requirements.txt"
+  "$VENV/bin/pip" install -q --disable-pip-version-check -r tools/requirements.txt
+  echo "$want" > "$stamp"
+fi
+
+# Rust: the one toolchain on the machine; Cargo.lock pins every crate.
+if ! command -v cargo >/dev/null; then
+  echo "setup: cargo not found (install Rust 1.95 with rustup)" >&2
+  exit 1
+fi
+if [ "${MILV_SKIP_BUILD:-0}" != 1 ]; then
+  log "cargo build --workspace --all-targets"
+  cargo build --locked --workspace --all-targets --quiet
+fi
