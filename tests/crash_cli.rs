@@ -103,6 +103,15 @@ fn sigkill_mid_batch_keeps_the_last_good_version_and_rerun_completes() {
     assert_eq!(code, 0, "{r}");
     assert_eq!(r["version"], 2);
     assert_eq!(r["ingested"].as_array().unwrap().len(), 24);
+    // Shards the killed run had finished were journaled and are reused, not decoded again.
+    assert!(r["resumed"].as_u64().unwrap() >= 1, "{r}");
+    assert!(
+        std::fs::read_dir(ds.join("_milv/staging"))
+            .unwrap()
+            .next()
+            .is_none(),
+        "journal removed"
+    );
     let info = ds_json(&["info", ds_s]);
     assert_eq!(info["episodes"], 26);
     assert_eq!(info["frames"], 2 * 10 + 24 * 40);

@@ -52,7 +52,7 @@ pub use error::{Error, Result};
 pub use log::{CommitMeta, FileAdd, InputDigest, TableChange, VersionEntry};
 pub use rows::{Episode, FrameRows, episodes_from_batches, episodes_to_batch};
 pub use schema::{ColType, Column, SCHEMA_VERSION, TableKind};
-pub use shard::{ShardOptions, ShardWriter};
+pub use shard::{ClosedShard, ShardOptions, ShardWriter};
 
 /// Re-exported so callers use the exact Arrow/Parquet versions the tables are written with.
 pub use deltalake::{arrow, parquet};

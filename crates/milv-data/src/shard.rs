@@ -48,6 +48,8 @@ impl Default for ShardOptions {
 
 struct OpenShard {
     writer: ArrowWriter<File>,
+    /// Episodes completed in this file, in order.
+    episodes: Vec<String>,
     rel_path: String,
     abs_path: PathBuf,
     rows: u64,
@@ -80,9 +82,10 @@ impl OpenShard {
         self.writer.write(batch).map_err(Error::parquet(&self.abs_path))
     }
 
-    fn close(self) -> Result<FileAdd> {
+    fn close(self) -> Result<ClosedShard> {
         let OpenShard {
             writer,
+            episodes,
             rel_path,
             abs_path,
             rows,
@@ -97,13 +100,16 @@ impl OpenShard {
             .ok()
             .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
             .map_or(0, |d| d.as_millis() as i64);
-        Ok(FileAdd {
-            path: rel_path,
-            size: meta.len(),
-            num_records: rows,
-            min_episode,
-            max_episode,
-            modification_time_ms,
+        Ok(ClosedShard {
+            file: FileAdd {
+                path: rel_path,
+                size: meta.len(),
+                num_records: rows,
+                min_episode,
+                max_episode,
+                modification_time_ms,
+            },
+            episodes,
         })
     }
 
@@ -119,6 +125,13 @@ enum Pending {
     Spilled(Box<OpenShard>),
 }
 
+/// A finished file and the episodes whose rows it holds.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ClosedShard {
+    pub file: FileAdd,
+    pub episodes: Vec<String>,
+}
+
 /// Writes the rows of one table into new Parquet files under the table's folder.
 pub struct ShardWriter {
     table_root: PathBuf,
@@ -127,7 +140,11 @@ pub struct ShardWriter {
     props: WriterProperties,
     current: Option<OpenShard>,
     pending: Pending,
-    done: Vec<FileAdd>,
+    /// Episode id of the open episode (from its first row).
+    pending_id: Option<String>,
+    done: Vec<ClosedShard>,
+    /// How many of `done` [`ShardWriter::take_closed`] has handed out.
+    taken: usize,
 }
 
 impl ShardWriter {
@@ -147,7 +164,9 @@ impl ShardWriter {
             props,
             current: None,
             pending: Pending::None,
+            pending_id: None,
             done: Vec::new(),
+            taken: 0,
         })
     }
 
@@ -163,6 +182,7 @@ impl ShardWriter {
             .map_err(Error::parquet(&abs_path))?;
         Ok(OpenShard {
             writer,
+            episodes: Vec::new(),
             rel_path,
             abs_path,
             rows: 0,
@@ -190,6 +210,12 @@ impl ShardWriter {
                 table: self.table_root.display().to_string(),
                 msg: format!("batch schema {:?} differs from the table's", batch.schema()),
             });
+        }
+        if self.pending_id.is_none()
+            && let Some(ids) = episode_ids(&batch)
+            && !ids.is_empty()
+        {
+            self.pending_id = Some(ids.value(0).to_string());
         }
         let spill = match &mut self.pending {
             Pending::None => return Err(Error::Invalid("push without begin_episode".into())),
@@ -220,9 +246,11 @@ impl ShardWriter {
 
     /// Ends the open episode: its rows become part of the output.
     pub fn end_episode(&mut self) -> Result<()> {
+        let id = self.pending_id.take();
         match std::mem::replace(&mut self.pending, Pending::None) {
             Pending::None => Err(Error::Invalid("end_episode without begin_episode".into())),
-            Pending::Spilled(shard) => {
+            Pending::Spilled(mut shard) => {
+                shard.episodes.extend(id);
                 self.done.push(shard.close()?);
                 Ok(())
             }
@@ -240,6 +268,7 @@ impl ShardWriter {
                 for b in &batches {
                     cur.write(b)?;
                 }
+                cur.episodes.extend(id);
                 if cur.writer.in_progress_size() >= self.opts.row_group_bytes {
                     cur.writer.flush().map_err(Error::parquet(&cur.abs_path))?;
                 }
@@ -251,6 +280,7 @@ impl ShardWriter {
 
     /// Drops the rows of the open episode (e.g. its video turned out corrupt).
     pub fn abort_episode(&mut self) {
+        self.pending_id = None;
         if let Pending::Spilled(shard) = std::mem::replace(&mut self.pending, Pending::None) {
             shard.discard();
         }
@@ -263,11 +293,22 @@ impl ShardWriter {
         Ok(())
     }
 
+    /// Files closed since the last call (complete on disk; e.g. to journal them so an
+    /// interrupted run can reuse them).
+    pub fn take_closed(&mut self) -> Vec<ClosedShard> {
+        let new = self.done[self.taken..].to_vec();
+        self.taken = self.done.len();
+        new
+    }
+
     /// Closes every file and returns them, ready to be committed.
     pub fn finish(mut self) -> Result<Vec<FileAdd>> {
         self.abort_episode();
         self.close_current()?;
-        Ok(std::mem::take(&mut self.done))
+        Ok(std::mem::take(&mut self.done)
+            .into_iter()
+            .map(|c| c.file)
+            .collect())
     }
 
     /// Deletes every file written so far (nothing was committed).
@@ -276,8 +317,8 @@ impl ShardWriter {
         if let Some(cur) = self.current.take() {
             cur.discard();
         }
-        for f in &self.done {
-            let _ = std::fs::remove_file(self.table_root.join(&f.path));
+        for c in &self.done {
+            let _ = std::fs::remove_file(self.table_root.join(&c.file.path));
         }
     }
 }

@@ -17,6 +17,7 @@ use serde::Serialize;
 use sha2::{Digest, Sha256};
 
 use crate::error::{Error, Result};
+use crate::journal::Journal;
 use crate::manifest::InputSpec;
 use crate::sidecar::{self, EpisodeMeta, Sidecar};
 
@@ -119,6 +120,9 @@ pub struct IngestReport {
     pub skipped: Vec<Skipped>,
     pub failed: Vec<Failed>,
     pub frames: u64,
+    /// Episodes taken over from an interrupted earlier run of the same batch (also listed
+    /// in `ingested`).
+    pub resumed: usize,
 }
 
 impl IngestReport {
@@ -531,6 +535,7 @@ fn ingest_attempt(
         skipped: Vec::new(),
         failed: Vec::new(),
         frames: 0,
+        resumed: 0,
     };
     let selected: Vec<&InputSpec> = inputs
         .iter()
@@ -573,6 +578,13 @@ fn ingest_attempt(
             }
         }
     }
+    // Reuse what an interrupted run of this same batch already finished.
+    let pending: BTreeSet<String> = todo.iter().map(|p| p.episode_id.clone()).collect();
+    let (journal, adopted) = Journal::open(ds.root(), &ds.table_root(TableKind::Frames), &pending)?;
+    let adopted_ids: BTreeSet<&str> = adopted.episodes.iter().map(|e| e.episode_id.as_str()).collect();
+    let (resumed, todo): (Vec<Planned>, Vec<Planned>) = todo
+        .into_iter()
+        .partition(|p| adopted_ids.contains(p.episode_id.as_str()));
     progress.planned(todo.len(), 0);
 
     let jobs = opts.jobs.max(1);
@@ -599,17 +611,43 @@ fn ingest_attempt(
             .map(|mut w| {
                 let rx = rx.clone();
                 let pool = &pool;
+                let journal = &journal;
                 s.spawn(move || {
                     let mut outcomes = Vec::new();
+                    let mut unjournaled: BTreeMap<String, Episode> = BTreeMap::new();
+                    let mut journal_error = None;
                     for p in rx.iter() {
                         let r = pool.install(|| ingest_one(p, opts, decoder_threads, &mut w, progress));
-                        if r.is_err() {
-                            w.abort_episode();
+                        match &r {
+                            Ok(ep) => {
+                                unjournaled.insert(ep.episode_id.clone(), ep.clone());
+                            }
+                            Err(_) => w.abort_episode(),
+                        }
+                        for c in w.take_closed() {
+                            let eps = c
+                                .episodes
+                                .iter()
+                                .filter_map(|id| unjournaled.remove(id))
+                                .collect();
+                            if let Err(e) = journal.record(c.file, eps) {
+                                journal_error = Some(e);
+                            }
                         }
                         progress.episode_done(&p.source, r.is_ok());
                         outcomes.push((p, r));
+                        if journal_error.is_some() {
+                            break;
+                        }
                     }
-                    (w.finish().map_err(Error::from), outcomes)
+                    let files = match journal_error {
+                        Some(e) => {
+                            w.abort();
+                            Err(e)
+                        }
+                        None => w.finish().map_err(Error::from),
+                    };
+                    (files, outcomes)
                 })
             })
             .collect();
@@ -638,16 +676,7 @@ fn ingest_attempt(
         for (p, r) in outcomes {
             match r {
                 Ok(ep) => {
-                    digests.push(InputDigest {
-                        uri: source_name(&p.source),
-                        sha256: p.source_sha256.clone(),
-                    });
-                    if let (Some(s), Some(sha)) = (&p.sidecar, &p.sidecar_sha256) {
-                        digests.push(InputDigest {
-                            uri: source_name(&s.path),
-                            sha256: sha.clone(),
-                        });
-                    }
+                    digests.extend(input_digests(p));
                     report.frames += ep.n_frames as u64;
                     report.ingested.push(Ingested {
                         episode_id: ep.episode_id.clone(),
@@ -663,6 +692,23 @@ fn ingest_attempt(
             }
         }
     }
+    for p in &resumed {
+        let n_frames = adopted
+            .episodes
+            .iter()
+            .find(|e| e.episode_id == p.episode_id)
+            .map_or(0, |e| e.n_frames);
+        report.frames += n_frames as u64;
+        report.ingested.push(Ingested {
+            episode_id: p.episode_id.clone(),
+            source: source_name(&p.source),
+            n_frames,
+        });
+        digests.extend(input_digests(p));
+    }
+    report.resumed = resumed.len();
+    frame_files.extend(adopted.files);
+    episodes.extend(adopted.episodes);
     let ids: Vec<String> = episodes.iter().map(|e| e.episode_id.clone()).collect();
     txn.add_files(TableKind::Frames, frame_files, ids.clone());
     if let Some(e) = fatal {
@@ -671,6 +717,7 @@ fn ingest_attempt(
     }
     if episodes.is_empty() {
         txn.abort();
+        journal.remove();
         return Ok(report);
     }
     let ep_files = match write_episodes(&txn, &episodes) {
@@ -694,7 +741,22 @@ fn ingest_attempt(
         "partition": opts.partition.map(|p| format!("{}/{}", p.index, p.count)),
     });
     report.version = txn.commit()?;
+    journal.remove();
     Ok(report)
+}
+
+fn input_digests(p: &Planned) -> Vec<InputDigest> {
+    let mut out = vec![InputDigest {
+        uri: source_name(&p.source),
+        sha256: p.source_sha256.clone(),
+    }];
+    if let (Some(s), Some(sha)) = (&p.sidecar, &p.sidecar_sha256) {
+        out.push(InputDigest {
+            uri: source_name(&s.path),
+            sha256: sha.clone(),
+        });
+    }
+    out
 }
 
 fn write_episodes(txn: &milv_data::Transaction<'_>, episodes: &[Episode]) -> Result<Vec<FileAdd>> {

@@ -5,6 +5,7 @@
 //! | [`ingest`] | [`ingest()`](ingest::ingest): plan, decode/encode in parallel, commit one version; [`IngestOptions`], [`IngestReport`] |
 //! | [`sidecar`] | per-episode action/state sidecars (JSON `milv-sidecar/1`, CSV) and [`EpisodeMeta`] |
 //! | [`manifest`] | many inputs at once (JSON lines or CSV): [`InputSpec`] |
+//! | `journal` | the resume journal: shards an interrupted run finished are reused by the next |
 //! | [`error`] | [`Error`]: every message names the file it is about |
 //!
 //! Episode ids are content hashes of the source bytes, the sidecar bytes, the metadata and
@@ -13,6 +14,7 @@
 
 pub mod error;
 pub mod ingest;
+mod journal;
 pub mod manifest;
 pub mod sidecar;
 

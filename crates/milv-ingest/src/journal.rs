@@ -1,0 +1,101 @@
+//! The resume journal of an ingest run: `_milv/staging/ingest-<key>.jsonl`.
+//!
+//! Whenever a worker closes a shard (every ~128 MiB, or after a long episode), the file and
+//! the episode rows it completes are appended here, synced. An interrupted run leaves the
+//! journal behind; the same command run again (same pending episodes, hence same key)
+//! adopts every journaled file that is still intact instead of decoding its episodes again.
+//! A successful commit deletes the journal.
+
+use std::collections::BTreeSet;
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Mutex;
+
+use milv_data::{Episode, FileAdd};
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::error::{Error, Result};
+
+#[derive(Serialize, Deserialize)]
+struct Line {
+    file: FileAdd,
+    episodes: Vec<Episode>,
+}
+
+/// Files and episodes an earlier, interrupted run of the same batch finished.
+#[derive(Default)]
+pub(crate) struct Adopted {
+    pub files: Vec<FileAdd>,
+    pub episodes: Vec<Episode>,
+}
+
+pub(crate) struct Journal {
+    path: PathBuf,
+    file: Mutex<std::fs::File>,
+}
+
+fn io(op: &'static str, path: &Path) -> impl FnOnce(std::io::Error) -> Error {
+    let path = path.to_path_buf();
+    move |source| Error::Io { op, source, path }
+}
+
+impl Journal {
+    /// Opens the journal of the batch made of `pending` episode ids and returns what it
+    /// holds that can be reused (files still present with their recorded size).
+    pub fn open(
+        dataset: &Path,
+        frames_root: &Path,
+        pending: &BTreeSet<String>,
+    ) -> Result<(Journal, Adopted)> {
+        let mut h = Sha256::new();
+        for id in pending {
+            h.update(id.as_bytes());
+            h.update([0]);
+        }
+        let key: String = h.finalize()[..12].iter().map(|b| format!("{b:02x}")).collect();
+        let dir = dataset.join("_milv/staging");
+        std::fs::create_dir_all(&dir).map_err(io("create staging folder", &dir))?;
+        let path = dir.join(format!("ingest-{key}.jsonl"));
+        let mut adopted = Adopted::default();
+        if let Ok(text) = std::fs::read_to_string(&path) {
+            // A torn last line (crash mid-append) simply doesn't parse and is ignored.
+            for line in text.lines().filter_map(|l| serde_json::from_str::<Line>(l).ok()) {
+                let intact = std::fs::metadata(frames_root.join(&line.file.path))
+                    .is_ok_and(|m| m.len() == line.file.size);
+                if intact && line.episodes.iter().all(|e| pending.contains(&e.episode_id)) {
+                    adopted.files.push(line.file);
+                    adopted.episodes.extend(line.episodes);
+                }
+            }
+        }
+        let file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(&path)
+            .map_err(io("open journal", &path))?;
+        Ok((
+            Journal {
+                path,
+                file: Mutex::new(file),
+            },
+            adopted,
+        ))
+    }
+
+    /// Records a finished file and the episodes it completes.
+    pub fn record(&self, file: FileAdd, episodes: Vec<Episode>) -> Result<()> {
+        let mut text = serde_json::to_string(&Line { file, episodes })
+            .map_err(|e| Error::input(&self.path, format!("journal: {e}")))?;
+        text.push('\n');
+        let mut f = self.file.lock().unwrap_or_else(|p| p.into_inner());
+        f.write_all(text.as_bytes())
+            .map_err(io("write journal", &self.path))?;
+        f.sync_data().map_err(io("sync journal", &self.path))
+    }
+
+    /// The batch is committed: the journal is no longer needed.
+    pub fn remove(self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
