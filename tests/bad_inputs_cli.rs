@@ -135,3 +135,51 @@ fn require_actions_duplicates_and_all_bad_batches() {
     assert_eq!(r["version"], 2, "an all-bad batch commits nothing");
     assert_eq!(ds_json(&["info", ds])["latest_version"], 2);
 }
+
+#[test]
+fn a_faststart_mp4_cut_short_is_reported_as_truncated() {
+    let dir = tempfile::tempdir().unwrap();
+    let full = dir.path().join("full.mp4");
+    let out = Command::new("ffmpeg")
+        .args([
+            "-nostdin",
+            "-v",
+            "error",
+            "-y",
+            "-f",
+            "lavfi",
+            "-i",
+            "testsrc2=size=64x48:rate=10",
+        ])
+        .args([
+            "-frames:v",
+            "40",
+            "-c:v",
+            "libx264",
+            "-preset",
+            "ultrafast",
+            "-pix_fmt",
+            "yuv420p",
+        ])
+        .args(["-movflags", "+faststart"])
+        .arg(&full)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let bytes = std::fs::read(&full).unwrap();
+    let cut = dir.path().join("cut.mp4");
+    std::fs::write(&cut, &bytes[..bytes.len() * 6 / 10]).unwrap();
+    let ds = dir.path().join("ds");
+    let (code, r) = ingest(&[
+        path_str(&ds),
+        path_str(&cut),
+        path_str(&full),
+        "--domain",
+        "human",
+    ]);
+    assert_eq!(code, 3, "{r}");
+    let fails = failures(&r);
+    let e = error_for(&fails, "cut.mp4");
+    assert!(e.contains("truncated"), "{e}");
+    assert_eq!(r["ingested"][0]["n_frames"], 40);
+}

@@ -2,6 +2,7 @@
 
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use anyhow::{Context as _, bail};
 use clap::{Parser, ValueEnum};
@@ -95,20 +96,23 @@ struct Args {
     json: bool,
 }
 
+/// One bar of episodes; its message counts frames, so a single long clip shows progress too.
 struct Bars {
-    frames: ProgressBar,
+    episodes: ProgressBar,
+    frames: AtomicU64,
 }
 
 impl Progress for Bars {
     fn planned(&self, episodes: usize, _frames: u64) {
-        self.frames.set_length(episodes as u64);
-        self.frames.set_message("episodes");
+        self.episodes.set_length(episodes as u64);
+        self.episodes.set_message("episodes");
     }
-    fn frames_done(&self, _n: u64) {
-        self.frames.tick();
+    fn frames_done(&self, n: u64) {
+        let total = self.frames.fetch_add(n, Ordering::Relaxed) + n;
+        self.episodes.set_message(format!("{total} frames"));
     }
     fn episode_done(&self, _source: &std::path::Path, _ok: bool) {
-        self.frames.inc(1);
+        self.episodes.inc(1);
     }
 }
 
@@ -167,7 +171,8 @@ fn run(args: Args) -> anyhow::Result<u8> {
     )
     .with_context(|| format!("opening dataset {}", args.dataset.display()))?;
     let bars = Bars {
-        frames: cli::bar(0, "planning"),
+        episodes: cli::bar(0, "planning"),
+        frames: AtomicU64::new(0),
     };
     let report = milv::ingest::ingest(
         &ds,
@@ -176,7 +181,7 @@ fn run(args: Args) -> anyhow::Result<u8> {
         CommitMeta::for_this_process("milv-ingest", "ingest"),
         &bars,
     )?;
-    bars.frames.finish_and_clear();
+    bars.episodes.finish_and_clear();
     if args.json {
         cli::print_json(&report)?;
     } else {

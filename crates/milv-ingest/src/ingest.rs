@@ -432,6 +432,18 @@ fn ingest_one(
     if st.n == 0 {
         return Err(Error::input(&p.source, "no decodable frames"));
     }
+    // A faststart MP4 cut short still opens and decodes its first part: the frame count
+    // the container declares tells.
+    if let Some(declared) = info.frames_hint
+        && frames_decoded < declared
+    {
+        return Err(Error::input(
+            &p.source,
+            format!(
+                "decoded {frames_decoded} of the {declared} frames the container declares (truncated or corrupt)"
+            ),
+        ));
+    }
     count_check(p, "action", n_actions, frames_decoded)?;
     count_check(p, "state", n_states, frames_decoded)?;
     if !st.rows.is_empty() {
