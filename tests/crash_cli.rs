@@ -73,16 +73,17 @@ fn sigkill_mid_batch_keeps_the_last_good_version_and_rerun_completes() {
         "--frame-encoding",
         "png",
     ];
+    let frames_dir = ds.join("frames");
+    let committed = parquet_count(&frames_dir);
     let mut child = Command::new(ingest_bin())
         .args(args)
         .stdout(Stdio::null())
         .stderr(Stdio::null())
         .spawn()
         .unwrap();
-    let frames_dir = ds.join("frames");
     let t0 = Instant::now();
-    // Files for at least 3 finished episodes exist: we are mid-batch.
-    while parquet_count(&frames_dir) < 1 + 3 && t0.elapsed() < Duration::from_secs(60) {
+    // Three new shards exist, so the first (episode 0) is closed and journaled: mid-batch.
+    while parquet_count(&frames_dir) < committed + 3 && t0.elapsed() < Duration::from_secs(60) {
         assert!(
             child.try_wait().unwrap().is_none(),
             "ingest finished before it could be killed"

@@ -11,10 +11,12 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 
 use deltalake::arrow::array::{Array, RecordBatch, StringArray};
+use deltalake::arrow::datatypes::DataType;
 use deltalake::arrow::datatypes::SchemaRef;
 use deltalake::parquet::arrow::ArrowWriter;
 use deltalake::parquet::basic::{Compression, ZstdLevel};
-use deltalake::parquet::file::properties::WriterProperties;
+use deltalake::parquet::file::properties::{EnabledStatistics, WriterProperties};
+use deltalake::parquet::schema::types::ColumnPath;
 
 use crate::error::{Error, Result};
 use crate::log::FileAdd;
@@ -32,6 +34,9 @@ pub struct ShardOptions {
     /// Row-group cut inside a streamed (very long) episode.
     pub max_row_group_bytes: usize,
     pub zstd_level: i32,
+    /// Per-column compression overrides: `None` stores the column uncompressed (already
+    /// compressed payloads such as PNG frames gain nothing from zstd and cost CPU).
+    pub column_zstd: Vec<(String, Option<i32>)>,
 }
 
 impl Default for ShardOptions {
@@ -42,6 +47,7 @@ impl Default for ShardOptions {
             episode_buffer_bytes: 48 << 20,
             max_row_group_bytes: 64 << 20,
             zstd_level: 3,
+            column_zstd: Vec::new(),
         }
     }
 }
@@ -150,16 +156,37 @@ pub struct ShardWriter {
 impl ShardWriter {
     pub fn new(table_root: &Path, table: TableKind, opts: ShardOptions) -> Result<Self> {
         std::fs::create_dir_all(table_root).map_err(Error::io("create table folder", table_root))?;
-        let level = ZstdLevel::try_new(opts.zstd_level)
-            .map_err(|e| Error::Invalid(format!("zstd level {}: {e}", opts.zstd_level)))?;
-        let props = WriterProperties::builder()
-            .set_compression(Compression::ZSTD(level))
+        let zstd = |level: i32| {
+            ZstdLevel::try_new(level)
+                .map(Compression::ZSTD)
+                .map_err(|e| Error::Invalid(format!("zstd level {level}: {e}")))
+        };
+        let schema = table.arrow_schema();
+        let mut props = WriterProperties::builder()
+            .set_compression(zstd(opts.zstd_level)?)
             // Row groups are cut by bytes at episode boundaries, never by row count.
-            .set_max_row_group_row_count(Some(usize::MAX))
-            .build();
+            .set_max_row_group_row_count(Some(usize::MAX));
+        // Binary payloads (frames) are unique blobs: dictionaries and min/max statistics
+        // over them only burn CPU and bloat the footer.
+        for f in schema.fields() {
+            if f.data_type() == &DataType::Binary {
+                let col = ColumnPath::from(f.name().as_str());
+                props = props
+                    .set_column_dictionary_enabled(col.clone(), false)
+                    .set_column_statistics_enabled(col, EnabledStatistics::None);
+            }
+        }
+        for (name, level) in &opts.column_zstd {
+            let c = match level {
+                Some(l) => zstd(*l)?,
+                None => Compression::UNCOMPRESSED,
+            };
+            props = props.set_column_compression(ColumnPath::from(name.as_str()), c);
+        }
+        let props = props.build();
         Ok(ShardWriter {
             table_root: table_root.to_path_buf(),
-            schema: table.arrow_schema(),
+            schema,
             opts,
             props,
             current: None,

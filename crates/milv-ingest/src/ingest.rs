@@ -305,7 +305,85 @@ struct EpisodeState<'a> {
     last_ts: i64,
 }
 
+/// Decodes (and resamples) `source`, sending frames in chunks; returns the number of
+/// source frames decoded. Stops early when the receiver is gone (the episode failed).
+fn decode_chunks(
+    source: Box<dyn milv_video::FrameSource>,
+    fps: Option<f64>,
+    tx: &crossbeam_channel::Sender<Result<Vec<Frame>, milv_video::Error>>,
+) -> u64 {
+    let decoded = Cell::new(0u64);
+    let counted = source.inspect(|f| {
+        if let Ok(f) = f {
+            decoded.set(decoded.get().max(f.source_index + 1));
+        }
+    });
+    let frames: Box<dyn Iterator<Item = Result<Frame, milv_video::Error>>> = match fps {
+        Some(fps) => match milv_video::Resample::new(counted, fps) {
+            Ok(r) => Box::new(r),
+            Err(e) => {
+                let _ = tx.send(Err(e));
+                return 0;
+            }
+        },
+        None => Box::new(counted),
+    };
+    let mut chunk = Vec::with_capacity(ENCODE_CHUNK);
+    for f in frames {
+        match f {
+            Ok(f) => {
+                chunk.push(f);
+                if chunk.len() == ENCODE_CHUNK {
+                    let full = std::mem::replace(&mut chunk, Vec::with_capacity(ENCODE_CHUNK));
+                    if tx.send(Ok(full)).is_err() {
+                        break;
+                    }
+                }
+            }
+            Err(e) => {
+                let _ = tx.send(Err(e));
+                return decoded.get();
+            }
+        }
+    }
+    if !chunk.is_empty() {
+        let _ = tx.send(Ok(chunk));
+    }
+    decoded.get()
+}
+
 impl EpisodeState<'_> {
+    fn check_frame(&mut self, f: &Frame, n_actions: Option<usize>, n_states: Option<usize>) -> Result<()> {
+        let p = self.p;
+        let size = (f.width, f.height);
+        if *self.size.get_or_insert(size) != size {
+            return Err(Error::Frame {
+                index: f.source_index,
+                msg: format!(
+                    "frame size changed from {:?} to {size:?} (use --resize)",
+                    self.size
+                ),
+                path: p.source.clone(),
+            });
+        }
+        // Fail early rather than after decoding a long clip.
+        for (what, n) in [("action", n_actions), ("state", n_states)] {
+            if let Some(n) = n
+                && f.source_index as usize >= n
+            {
+                return Err(Error::input(
+                    p.sidecar.as_ref().map_or(&p.source, |s| &s.path),
+                    format!(
+                        "{n} {what} rows for at least {} video frames (need one row per frame of {})",
+                        f.source_index + 1,
+                        p.source.display()
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     fn row(table: Option<&Vec<Vec<f32>>>, i: u64) -> Option<&[f32]> {
         table.and_then(|t| t.get(i as usize)).map(Vec::as_slice)
     }
@@ -374,16 +452,6 @@ fn ingest_one(
     };
     let source = milv_video::open_frames(&p.source, p.meta.folder_fps, &dopts)?;
     let info = source.info().clone();
-    let decoded = Cell::new(0u64);
-    let counted = source.inspect(|f| {
-        if let Ok(f) = f {
-            decoded.set(decoded.get().max(f.source_index + 1));
-        }
-    });
-    let frames: Box<dyn Iterator<Item = Result<Frame, milv_video::Error>>> = match opts.fps {
-        Some(fps) => Box::new(milv_video::Resample::new(counted, fps)?),
-        None => Box::new(counted),
-    };
     let side = p.sidecar.as_ref();
     let n_actions = side.and_then(|s| s.actions.as_ref()).map(Vec::len);
     let n_states = side.and_then(|s| s.states.as_ref()).map(Vec::len);
@@ -395,40 +463,23 @@ fn ingest_one(
         size: None,
         last_ts: 0,
     };
-    let mut chunk = Vec::with_capacity(ENCODE_CHUNK);
     w.begin_episode()?;
-    for f in frames {
-        let f = f?;
-        let size = (f.width, f.height);
-        if *st.size.get_or_insert(size) != size {
-            return Err(Error::Frame {
-                index: f.source_index,
-                msg: format!("frame size changed from {:?} to {size:?} (use --resize)", st.size),
-                path: p.source.clone(),
-            });
-        }
-        // Fail early rather than after decoding a long clip.
-        for (what, n) in [("action", n_actions), ("state", n_states)] {
-            if let Some(n) = n
-                && f.source_index as usize >= n
-            {
-                return Err(Error::input(
-                    side.map_or(&p.source, |s| &s.path),
-                    format!(
-                        "{n} {what} rows for at least {} video frames (need one row per frame of {})",
-                        f.source_index + 1,
-                        p.source.display()
-                    ),
-                ));
+    let resample = opts.fps;
+    // Decoding runs on its own thread, up to two chunks ahead of encoding and writing.
+    let frames_decoded = std::thread::scope(|s| -> Result<u64> {
+        let (tx, rx) = crossbeam_channel::bounded(2);
+        let decoder = s.spawn(move || decode_chunks(source, resample, &tx));
+        for chunk in rx.iter() {
+            let mut chunk: Vec<Frame> = chunk?;
+            for f in &chunk {
+                st.check_frame(f, n_actions, n_states)?;
             }
-        }
-        chunk.push(f);
-        if chunk.len() == ENCODE_CHUNK {
             st.flush_chunk(&mut chunk, w, progress)?;
         }
-    }
-    st.flush_chunk(&mut chunk, w, progress)?;
-    let frames_decoded = decoded.get();
+        decoder
+            .join()
+            .map_err(|_| Error::input(&p.source, "the decoder thread panicked"))
+    })?;
     if st.n == 0 {
         return Err(Error::input(&p.source, "no decodable frames"));
     }
@@ -606,9 +657,13 @@ fn ingest_attempt(
         .num_threads(jobs)
         .build()
         .map_err(|e| Error::input(ds.root(), format!("thread pool: {e}")))?;
+    let mut shard = opts.shard.clone();
+    // PNG/JPEG frames are compressed already; raw frames get fast zstd.
+    let image_zstd = (opts.encoding == FrameEncoding::Raw).then_some(1);
+    shard.column_zstd.push(("image".into(), image_zstd));
     let mut writers = Vec::with_capacity(workers);
     for _ in 0..workers {
-        writers.push(txn.shard_writer(TableKind::Frames, opts.shard.clone())?);
+        writers.push(txn.shard_writer(TableKind::Frames, shard.clone())?);
     }
     let (tx, rx) = crossbeam_channel::unbounded::<&Planned>();
     for p in &todo {
