@@ -44,8 +44,8 @@ impl Default for ShardOptions {
         ShardOptions {
             target_file_bytes: 128 << 20,
             row_group_bytes: 32 << 20,
-            episode_buffer_bytes: 48 << 20,
-            max_row_group_bytes: 64 << 20,
+            episode_buffer_bytes: 32 << 20,
+            max_row_group_bytes: 32 << 20,
             zstd_level: 3,
             column_zstd: Vec::new(),
         }
