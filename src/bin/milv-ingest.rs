@@ -130,7 +130,6 @@ fn run(args: Args) -> anyhow::Result<u8> {
         }
         inputs[0].sidecar = Some(s.clone());
     }
-    let is_folder_input = args.inputs.iter().any(|p| p.is_dir());
     let encoding = match args.frame_encoding {
         Encoding::Png => FrameEncoding::Png,
         Encoding::Jpeg => FrameEncoding::Jpeg {
@@ -146,14 +145,14 @@ fn run(args: Args) -> anyhow::Result<u8> {
             task_family: args.task_family,
             pair_id: args.pair_id,
             split: args.split,
-            // For frame folders --fps is their rate, not a resampling target.
+            // For frame folders --fps is their rate; videos are resampled to it.
             fps: args.fps,
         },
         resize: args.resize.map(|r| Resize {
             policy: args.aspect,
             ..r
         }),
-        fps: if is_folder_input { None } else { args.fps },
+        fps: args.fps,
         encoding,
         jobs: args
             .jobs

@@ -248,9 +248,9 @@ impl Dataset {
             let mut out = Vec::new();
             let versions = self.versions()?;
             for t in TableKind::ALL {
-                let applied = if self.table_root(t).join("_delta_log").is_dir() {
+                let applied = if delta::has_delta_log(&self.root, t) {
                     let table = delta::open_or_create(&self.root, t).await?;
-                    delta::applied_version(&table, t).await?
+                    delta::applied_version(&self.root, &table, t).await?
                 } else {
                     None
                 };
@@ -285,11 +285,11 @@ impl Dataset {
         self.rt.block_on(async {
             let mut deleted = Vec::new();
             for t in TableKind::ALL {
-                if !self.table_root(t).join("_delta_log").is_dir() {
+                if !delta::has_delta_log(&self.root, t) {
                     continue;
                 }
                 let table = delta::open_or_create(&self.root, t).await?;
-                deleted.extend(delta::vacuum(table, t, retain_hours, dry_run).await?);
+                deleted.extend(delta::vacuum(&self.root, table, t, retain_hours, dry_run).await?);
             }
             Ok(deleted)
         })
@@ -302,6 +302,7 @@ impl Dataset {
             base: self.latest_version()?,
             meta,
             changes: BTreeMap::new(),
+            adopted: BTreeSet::new(),
         })
     }
 }
@@ -335,6 +336,9 @@ pub struct Transaction<'a> {
     base: u64,
     meta: CommitMeta,
     changes: BTreeMap<TableKind, TableChange>,
+    /// Added files this transaction did not write (adopted from an interrupted run):
+    /// never deleted on abort, since another run may have committed them meanwhile.
+    adopted: BTreeSet<(TableKind, String)>,
 }
 
 impl Transaction<'_> {
@@ -357,6 +361,12 @@ impl Transaction<'_> {
         c.episodes_added.extend(episodes);
     }
 
+    /// Adds files written by an earlier, interrupted process (see [`Transaction::abort`]).
+    pub fn adopt_files(&mut self, table: TableKind, files: Vec<FileAdd>, episodes: Vec<String>) {
+        self.adopted.extend(files.iter().map(|f| (table, f.path.clone())));
+        self.add_files(table, files, episodes);
+    }
+
     pub fn remove_files(&mut self, table: TableKind, paths: Vec<String>, episodes: Vec<String>) {
         let c = self.changes.entry(table).or_default();
         c.remove.extend(paths);
@@ -373,9 +383,36 @@ impl Transaction<'_> {
     pub fn abort(self) {
         for (t, c) in &self.changes {
             for f in &c.add {
-                let _ = std::fs::remove_file(self.ds.table_root(*t).join(&f.path));
+                if !self.adopted.contains(&(*t, f.path.clone())) {
+                    let _ = std::fs::remove_file(self.ds.table_root(*t).join(&f.path));
+                }
             }
         }
+    }
+
+    /// Every added file must be on disk, complete, with its folder entry synced, before
+    /// a version may name it (e.g. a concurrent vacuum may have removed an orphan).
+    fn check_files_durable(&self) -> Result<()> {
+        for (t, c) in &self.changes {
+            let root = self.ds.table_root(*t);
+            for f in &c.add {
+                let path = root.join(&f.path);
+                let size = std::fs::metadata(&path)
+                    .map_err(Error::io("check new file", &path))?
+                    .len();
+                if size != f.size {
+                    return Err(Error::Invalid(format!(
+                        "file is {size} bytes, expected {}: {}",
+                        f.size,
+                        path.display()
+                    )));
+                }
+            }
+            if !c.add.is_empty() {
+                log::sync_dir(&root)?;
+            }
+        }
+        Ok(())
     }
 
     /// Checks that a version committed after our base does not clash with this change.
@@ -408,6 +445,10 @@ impl Transaction<'_> {
         if self.is_empty() {
             return Ok(self.base);
         }
+        if let Err(e) = self.check_files_durable() {
+            self.abort();
+            return Err(e);
+        }
         let mut tables = BTreeMap::new();
         for (t, c) in &self.changes {
             tables.insert(t.name().to_string(), c.clone());
@@ -436,8 +477,13 @@ impl Transaction<'_> {
             }
         };
         // The version is durable now; the Delta commits below can be redone by anyone.
-        self.ds.roll_forward()?;
-        Ok(version)
+        match self.ds.roll_forward() {
+            Ok(_) => Ok(version),
+            Err(e) => Err(Error::NotYetInDelta {
+                version,
+                source: Box::new(e),
+            }),
+        }
     }
 }
 

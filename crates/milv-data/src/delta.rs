@@ -31,8 +31,16 @@ pub(crate) fn table_url(root: &Path, table: TableKind) -> Result<url::Url> {
         .map_err(|()| Error::Invalid(format!("cannot make a URL of {}", abs.display())))
 }
 
-fn has_delta_log(root: &Path, table: TableKind) -> bool {
-    root.join(table.name()).join("_delta_log").is_dir()
+/// A table exists once its first commit does (a crash mid-creation leaves a bare folder).
+pub(crate) fn has_delta_log(root: &Path, table: TableKind) -> bool {
+    root.join(table.name())
+        .join("_delta_log/00000000000000000000.json")
+        .is_file()
+}
+
+/// How errors name a table: its folder.
+fn label(root: &Path, table: TableKind) -> String {
+    root.join(table.name()).display().to_string()
 }
 
 /// Opens a table at its latest version, creating it (empty, Delta version 0) if needed.
@@ -58,8 +66,9 @@ pub(crate) async fn open_or_create(root: &Path, table: TableKind) -> Result<Delt
         match created {
             Ok(t) => return Ok(t),
             // Lost a creation race to another process: fine, open theirs.
-            Err(DeltaTableError::VersionAlreadyExists(_)) | Err(DeltaTableError::Generic(_)) => {}
-            Err(e) => return Err(Error::delta(table.name())(e)),
+            Err(DeltaTableError::VersionAlreadyExists(_)) => {}
+            Err(_) if has_delta_log(root, table) => {}
+            Err(e) => return Err(Error::delta(&label(root, table))(e)),
         }
     }
     DeltaTableBuilder::from_url(url)
@@ -70,17 +79,17 @@ pub(crate) async fn open_or_create(root: &Path, table: TableKind) -> Result<Delt
 }
 
 /// The table's `milv` application transaction version: the last dataset version applied.
-pub(crate) async fn applied_version(table: &DeltaTable, kind: TableKind) -> Result<Option<u64>> {
+pub(crate) async fn applied_version(root: &Path, table: &DeltaTable, kind: TableKind) -> Result<Option<u64>> {
     let v = table
         .snapshot()
-        .map_err(Error::delta(kind.name()))?
+        .map_err(Error::delta(&label(root, kind)))?
         .transaction_version(table.log_store().as_ref(), APP_ID)
         .await
-        .map_err(Error::delta(kind.name()))?;
+        .map_err(Error::delta(&label(root, kind)))?;
     Ok(v.and_then(|v| u64::try_from(v).ok()))
 }
 
-fn add_action(f: &FileAdd) -> Action {
+fn add_action(f: &FileAdd, data_change: bool) -> Action {
     let mut stats = json!({ "numRecords": f.num_records });
     if let (Some(lo), Some(hi)) = (&f.min_episode, &f.max_episode) {
         stats["minValues"] = json!({ "episode_id": lo });
@@ -92,7 +101,7 @@ fn add_action(f: &FileAdd) -> Action {
         partition_values: HashMap::new(),
         size: f.size as i64,
         modification_time: f.modification_time_ms,
-        data_change: true,
+        data_change,
         stats: Some(stats.to_string()),
         tags: None,
         deletion_vector: None,
@@ -102,10 +111,10 @@ fn add_action(f: &FileAdd) -> Action {
     })
 }
 
-fn remove_action(path: &str, now_ms: i64) -> Action {
+fn remove_action(path: &str, now_ms: i64, data_change: bool) -> Action {
     Action::Remove(Remove {
         path: path.to_string(),
-        data_change: true,
+        data_change,
         deletion_timestamp: Some(now_ms),
         extended_file_metadata: None,
         partition_values: None,
@@ -124,13 +133,20 @@ pub(crate) async fn apply(root: &Path, kind: TableKind, entry: &VersionEntry) ->
     };
     let mut table = open_or_create(root, kind).await?;
     loop {
-        if applied_version(&table, kind).await? >= Some(entry.version) {
+        if applied_version(root, &table, kind).await? >= Some(entry.version) {
             return Ok(());
         }
         let read_version = table.version().unwrap_or(0);
         let now_ms = chrono_now_ms();
-        let mut actions: Vec<Action> = change.add.iter().map(add_action).collect();
-        actions.extend(change.remove.iter().map(|p| remove_action(p, now_ms)));
+        // Compaction rewrites rows without changing them: streaming readers may skip it.
+        let data_change = entry.meta.operation != "compact";
+        let mut actions: Vec<Action> = change.add.iter().map(|f| add_action(f, data_change)).collect();
+        actions.extend(
+            change
+                .remove
+                .iter()
+                .map(|p| remove_action(p, now_ms, data_change)),
+        );
         let operation = if change.remove.is_empty() {
             DeltaOperation::Write {
                 mode: SaveMode::Append,
@@ -153,7 +169,7 @@ pub(crate) async fn apply(root: &Path, kind: TableKind, entry: &VersionEntry) ->
         .into_iter()
         .map(|(k, v)| (k.to_string(), v))
         .collect();
-        let snapshot = table.snapshot().map_err(Error::delta(kind.name()))?;
+        let snapshot = table.snapshot().map_err(Error::delta(&label(root, kind)))?;
         let props = CommitProperties::default()
             .with_metadata(app_metadata)
             .with_application_transaction(Transaction::new_with_last_update(
@@ -162,7 +178,9 @@ pub(crate) async fn apply(root: &Path, kind: TableKind, entry: &VersionEntry) ->
                 Some(now_ms),
             ))
             // No automatic retry: a lost race is re-examined above (was it our entry?).
-            .with_max_retries(0);
+            .with_max_retries(0)
+            // Old dataset versions map to Delta versions through this history: keep it.
+            .with_cleanup_expired_logs(Some(false));
         let result = CommitBuilder::from(props)
             .with_actions(actions)
             .build(Some(snapshot), table.log_store(), operation)
@@ -174,9 +192,12 @@ pub(crate) async fn apply(root: &Path, kind: TableKind, entry: &VersionEntry) ->
             | Err(DeltaTableError::Transaction {
                 source: TransactionError::MaxCommitAttempts(_) | TransactionError::VersionAlreadyExists(_),
             }) => {
-                table.update_state().await.map_err(Error::delta(kind.name()))?;
+                table
+                    .update_state()
+                    .await
+                    .map_err(Error::delta(&label(root, kind)))?;
             }
-            Err(e) => return Err(Error::delta(kind.name())(e)),
+            Err(e) => return Err(Error::delta(&label(root, kind))(e)),
         }
     }
 }
@@ -197,7 +218,7 @@ pub(crate) async fn version_map(root: &Path, kind: TableKind) -> Result<BTreeMap
         .history(None)
         .try_collect()
         .await
-        .map_err(Error::delta(kind.name()))?;
+        .map_err(Error::delta(&label(root, kind)))?;
     let mut out = BTreeMap::new();
     for info in infos {
         let dv = info.info.get("milv.dataset_version").and_then(Value::as_u64);
@@ -213,12 +234,12 @@ pub(crate) async fn version_map(root: &Path, kind: TableKind) -> Result<BTreeMap
 pub(crate) async fn files_at(root: &Path, kind: TableKind, delta_version: u64) -> Result<Vec<String>> {
     let url = table_url(root, kind)?;
     let table = DeltaTableBuilder::from_url(url)
-        .map_err(Error::delta(kind.name()))?
+        .map_err(Error::delta(&label(root, kind)))?
         .with_version(delta_version)
         .load()
         .await
-        .map_err(Error::delta(kind.name()))?;
-    let snapshot = table.snapshot().map_err(Error::delta(kind.name()))?;
+        .map_err(Error::delta(&label(root, kind)))?;
+    let snapshot = table.snapshot().map_err(Error::delta(&label(root, kind)))?;
     let mut paths: Vec<String> = snapshot.log_data().iter().map(|f| f.path().to_string()).collect();
     paths.sort();
     Ok(paths)
@@ -226,6 +247,7 @@ pub(crate) async fn files_at(root: &Path, kind: TableKind, delta_version: u64) -
 
 /// Delta's vacuum in full mode (also removes files no commit ever referenced).
 pub(crate) async fn vacuum(
+    root: &Path,
     table: DeltaTable,
     kind: TableKind,
     retain_hours: u64,
@@ -238,6 +260,6 @@ pub(crate) async fn vacuum(
         .with_enforce_retention_duration(false)
         .with_dry_run(dry_run)
         .await
-        .map_err(Error::delta(kind.name()))?;
+        .map_err(Error::delta(&label(root, kind)))?;
     Ok(metrics.files_deleted)
 }

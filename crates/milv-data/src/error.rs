@@ -30,6 +30,14 @@ pub enum Error {
     },
     #[error("conflict: {0}")]
     Conflict(String),
+    /// The version exists (it is durable and readable), but committing it to the Delta
+    /// tables failed; the next writer or `milv-ds verify --repair` completes it.
+    #[error("version {version} is committed, but not yet in the Delta tables: {source}")]
+    NotYetInDelta {
+        version: u64,
+        #[source]
+        source: Box<Error>,
+    },
     #[error("delta table {table}: {source}")]
     Delta {
         table: String,

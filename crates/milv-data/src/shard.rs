@@ -247,7 +247,7 @@ impl ShardWriter {
         let spill = match &mut self.pending {
             Pending::None => return Err(Error::Invalid("push without begin_episode".into())),
             Pending::Buffered { batches, bytes, .. } => {
-                *bytes += batch.get_array_memory_size();
+                *bytes += batch_bytes(&batch);
                 batches.push(batch);
                 *bytes > self.opts.episode_buffer_bytes
             }
@@ -348,6 +348,16 @@ impl ShardWriter {
             let _ = std::fs::remove_file(self.table_root.join(&c.file.path));
         }
     }
+}
+
+/// Bytes a batch's rows occupy; unlike `get_array_memory_size`, a slice counts only its
+/// own rows, not its parent's whole buffers.
+pub fn batch_bytes(batch: &RecordBatch) -> usize {
+    batch
+        .columns()
+        .iter()
+        .map(|c| c.to_data().get_slice_memory_size().unwrap_or(0))
+        .sum()
 }
 
 /// The `episode_id` column of a batch (first column of every MILV table that has one).

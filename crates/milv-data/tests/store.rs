@@ -221,6 +221,7 @@ fn adding_an_episode_twice_concurrently_conflicts() {
     // Plan a transaction, let another writer land the same episode, then commit.
     let mut txn = ds.begin(meta("ingest")).unwrap();
     add_episodes(&ds, &["same"], 2, ShardOptions::default());
+    std::fs::write(ds.table_root(TableKind::Frames).join("x.parquet"), b"x").unwrap();
     txn.add_files(TableKind::Episodes, Vec::new(), vec!["same".into()]);
     txn.add_files(
         TableKind::Frames,
@@ -270,4 +271,23 @@ fn delete_compact_and_vacuum() {
         ds.scan(TableKind::Frames, 1, None).unwrap().any(|b| b.is_err()),
         "v1's files are gone"
     );
+}
+
+#[test]
+fn a_version_never_names_a_missing_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = Dataset::open_or_create(dir.path(), meta("create")).unwrap();
+    let mut txn = ds.begin(meta("ingest")).unwrap();
+    let gone = milv_data::FileAdd {
+        path: "vacuumed.parquet".into(),
+        size: 10,
+        num_records: 1,
+        min_episode: None,
+        max_episode: None,
+        modification_time_ms: 0,
+    };
+    txn.add_files(TableKind::Frames, vec![gone], vec!["e".into()]);
+    let e = txn.commit().unwrap_err().to_string();
+    assert!(e.contains("vacuumed.parquet"), "{e}");
+    assert_eq!(ds.latest_version().unwrap(), 0);
 }

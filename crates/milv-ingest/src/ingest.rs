@@ -24,6 +24,9 @@ use crate::sidecar::{self, EpisodeMeta, Sidecar};
 pub const DOMAINS: &[&str] = &["human", "robot"];
 pub const KINDS: &[&str] = &["demo", "random", "paired"];
 pub const SPLITS: &[&str] = &["train", "val", "test"];
+/// Frame rates accepted for folders and resampling.
+pub const MIN_FPS: f64 = 0.001;
+pub const MAX_FPS: f64 = 10_000.0;
 
 /// `i/n`: this worker takes every input whose position `p` has `p % n == i`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -123,6 +126,8 @@ pub struct IngestReport {
     /// Episodes taken over from an interrupted earlier run of the same batch (also listed
     /// in `ingested`).
     pub resumed: usize,
+    /// Problems that did not stop the run.
+    pub warnings: Vec<String>,
 }
 
 impl IngestReport {
@@ -224,9 +229,12 @@ fn resolve_meta(spec: &InputSpec, sidecar: Option<&Sidecar>, defaults: &EpisodeM
     let split = m.split.unwrap_or_else(|| "train".into());
     check_choice(p, "split", &split, SPLITS)?;
     if let Some(f) = m.fps
-        && !(f.is_finite() && f > 0.0)
+        && !(MIN_FPS..=MAX_FPS).contains(&f)
     {
-        return Err(Error::input(p, format!("fps {f} is not a positive number")));
+        return Err(Error::input(
+            p,
+            format!("fps {f} is outside {MIN_FPS}..={MAX_FPS}"),
+        ));
     }
     Ok(Resolved {
         domain,
@@ -360,8 +368,11 @@ impl EpisodeState<'_> {
             return Err(Error::Frame {
                 index: f.source_index,
                 msg: format!(
-                    "frame size changed from {:?} to {size:?} (use --resize)",
-                    self.size
+                    "frame size changed from {}x{} to {}x{} (use --resize)",
+                    self.size.map_or(0, |s| s.0),
+                    self.size.map_or(0, |s| s.1),
+                    size.0,
+                    size.1
                 ),
                 path: p.source.clone(),
             });
@@ -465,7 +476,8 @@ fn ingest_one(
         last_ts: 0,
     };
     w.begin_episode()?;
-    let resample = opts.fps;
+    // --fps resamples videos; a frame folder's rate is its own (folder_fps).
+    let resample = if p.source.is_dir() { None } else { opts.fps };
     // Decoding runs on its own thread, up to two chunks ahead of encoding and writing.
     let frames_decoded = std::thread::scope(|s| -> Result<u64> {
         let (tx, rx) = crossbeam_channel::bounded(2);
@@ -486,7 +498,7 @@ fn ingest_one(
     }
     // A faststart MP4 cut short still opens and decodes its first part: the frame count
     // the container declares tells.
-    if let Some(declared) = info.frames_hint
+    if let Some(declared) = info.frames_declared
         && frames_decoded < declared
     {
         return Err(Error::input(
@@ -600,6 +612,7 @@ fn ingest_attempt(
         failed: Vec::new(),
         frames: 0,
         resumed: 0,
+        warnings: Vec::new(),
     };
     let selected: Vec<&InputSpec> = inputs
         .iter()
@@ -682,12 +695,22 @@ fn ingest_attempt(
                 s.spawn(move || {
                     let mut outcomes = Vec::new();
                     let mut unjournaled: BTreeMap<String, Episode> = BTreeMap::new();
-                    let mut journal_error = None;
+                    let mut fatal = None;
                     for p in rx.iter() {
-                        let r = pool.install(|| ingest_one(p, opts, &mut w, progress));
+                        let mut r = pool.install(|| ingest_one(p, opts, &mut w, progress));
                         match &r {
                             Ok(ep) => {
                                 unjournaled.insert(ep.episode_id.clone(), ep.clone());
+                            }
+                            // The shard writer itself failed (disk full, ...): its open
+                            // file is lost, so nothing more may be written through it.
+                            Err(Error::Data(_)) => {
+                                if let Err(e) = std::mem::replace(
+                                    &mut r,
+                                    Err(Error::input(&p.source, "not ingested: the shard writer failed")),
+                                ) {
+                                    fatal = Some(e);
+                                }
                             }
                             Err(_) => w.abort_episode(),
                         }
@@ -698,16 +721,16 @@ fn ingest_attempt(
                                 .filter_map(|id| unjournaled.remove(id))
                                 .collect();
                             if let Err(e) = journal.record(c.file, eps) {
-                                journal_error = Some(e);
+                                fatal = Some(e);
                             }
                         }
                         progress.episode_done(&p.source, r.is_ok());
                         outcomes.push((p, r));
-                        if journal_error.is_some() {
+                        if fatal.is_some() {
                             break;
                         }
                     }
-                    let files = match journal_error {
+                    let files = match fatal {
                         Some(e) => {
                             w.abort();
                             Err(e)
@@ -774,10 +797,12 @@ fn ingest_attempt(
         digests.extend(input_digests(p));
     }
     report.resumed = resumed.len();
-    frame_files.extend(adopted.files);
+    let new_ids: Vec<String> = episodes.iter().map(|e| e.episode_id.clone()).collect();
+    txn.add_files(TableKind::Frames, frame_files, new_ids);
+    let adopted_ids: Vec<String> = adopted.episodes.iter().map(|e| e.episode_id.clone()).collect();
+    txn.adopt_files(TableKind::Frames, adopted.files, adopted_ids);
     episodes.extend(adopted.episodes);
     let ids: Vec<String> = episodes.iter().map(|e| e.episode_id.clone()).collect();
-    txn.add_files(TableKind::Frames, frame_files, ids.clone());
     if let Some(e) = fatal {
         txn.abort();
         return Err(e);
@@ -807,7 +832,17 @@ fn ingest_attempt(
         "fps": opts.fps,
         "partition": opts.partition.map(|p| format!("{}/{}", p.index, p.count)),
     });
-    report.version = txn.commit()?;
+    report.version = match txn.commit() {
+        Ok(v) => v,
+        Err(milv_data::Error::NotYetInDelta { version, source }) => {
+            report.warnings.push(format!(
+                "version {version} is committed but not yet in the Delta tables ({source}); \
+                 the next write or `milv-ds verify --repair` completes it"
+            ));
+            version
+        }
+        Err(e) => return Err(e.into()),
+    };
     journal.remove();
     Ok(report)
 }

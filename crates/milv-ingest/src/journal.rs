@@ -57,6 +57,30 @@ impl Journal {
         let dir = dataset.join("_milv/staging");
         std::fs::create_dir_all(&dir).map_err(io("create staging folder", &dir))?;
         let path = dir.join(format!("ingest-{key}.jsonl"));
+        let open = |p: &Path| {
+            std::fs::OpenOptions::new()
+                .create(true)
+                .read(true)
+                .append(true)
+                .open(p)
+                .map_err(io("open journal", p))
+        };
+        let file = open(&path)?;
+        if file.try_lock().is_err() {
+            // The same batch is being ingested right now by another process: its files
+            // are not ours to take. Journal on the side instead.
+            let own = dir.join(format!("ingest-{key}-{}.jsonl", uuid_like()));
+            let file = open(&own)?;
+            file.try_lock()
+                .map_err(|e| Error::input(&own, format!("lock journal: {e}")))?;
+            return Ok((
+                Journal {
+                    path: own,
+                    file: Mutex::new(file),
+                },
+                Adopted::default(),
+            ));
+        }
         let mut adopted = Adopted::default();
         if let Ok(text) = std::fs::read_to_string(&path) {
             // A torn last line (crash mid-append) simply doesn't parse and is ignored.
@@ -69,11 +93,6 @@ impl Journal {
                 }
             }
         }
-        let file = std::fs::OpenOptions::new()
-            .create(true)
-            .append(true)
-            .open(&path)
-            .map_err(io("open journal", &path))?;
         Ok((
             Journal {
                 path,
@@ -94,8 +113,17 @@ impl Journal {
         f.sync_data().map_err(io("sync journal", &self.path))
     }
 
-    /// The batch is committed: the journal is no longer needed.
+    /// The batch is committed: the journal is no longer needed. (Its lock goes with the
+    /// file handle.)
     pub fn remove(self) {
         let _ = std::fs::remove_file(&self.path);
     }
+}
+
+/// A unique suffix without another dependency: time and process id.
+fn uuid_like() -> String {
+    let t = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    format!("{t:x}-{}", std::process::id())
 }

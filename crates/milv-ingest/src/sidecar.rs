@@ -223,13 +223,16 @@ fn parse_csv(path: &Path, text: &str) -> Result<Sidecar> {
     let headers = rdr.headers().map_err(|e| bad(format!("header: {e}")))?.clone();
     let mut action_cols = Vec::new();
     let mut state_cols = Vec::new();
+    let mut index_col = None;
     for (i, h) in headers.iter().enumerate() {
         let h = h.trim();
         if let Some(n) = h.strip_prefix("action.") {
             action_cols.push((i, n.to_string()));
         } else if let Some(n) = h.strip_prefix("state.") {
             state_cols.push((i, n.to_string()));
-        } else if h != "frame_index" {
+        } else if h == "frame_index" {
+            index_col = Some(i);
+        } else {
             return Err(bad(format!(
                 "column {h:?} is neither action.<name>, state.<name> nor frame_index"
             )));
@@ -244,6 +247,15 @@ fn parse_csv(path: &Path, text: &str) -> Result<Sidecar> {
                 "row {r} has {} fields, header has {}",
                 rec.len(),
                 headers.len()
+            )));
+        }
+        // Rows are matched to frames by position; a frame_index column must agree.
+        if let Some(i) = index_col
+            && rec.get(i).map(str::trim) != Some(r.to_string().as_str())
+        {
+            return Err(bad(format!(
+                "row {r}: frame_index is {:?}, expected {r} (one row per frame, in order)",
+                rec.get(i).unwrap_or("")
             )));
         }
         let get = |cols: &[(usize, String)]| -> Result<Vec<f64>> {
@@ -322,6 +334,14 @@ mod tests {
         assert_eq!(s.meta.task_id.as_deref(), Some("draw/square"));
         assert_eq!(s.action_names.unwrap(), vec!["dx", "dy"]);
         assert_eq!(s.states.unwrap(), vec![vec![3.0], vec![6.0]]);
+    }
+
+    #[test]
+    fn csv_frame_index_must_count_rows() {
+        let ok = parse_csv(Path::new("a.csv"), "frame_index,action.dx\n0,1\n1,2\n").unwrap();
+        assert_eq!(ok.actions.unwrap().len(), 2);
+        let e = parse_csv(Path::new("a.csv"), "frame_index,action.dx\n0,1\n2,2\n").unwrap_err();
+        assert!(e.to_string().contains("frame_index is \"2\", expected 1"), "{e}");
     }
 
     #[test]

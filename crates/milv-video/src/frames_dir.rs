@@ -101,6 +101,7 @@ impl FrameDirReader {
             fps,
             duration_ns: Some((n as f64 * 1e9 / fps).round() as i64),
             frames_hint: Some(n),
+            frames_declared: Some(n),
             codec: codec.to_string(),
             container: "image_folder".to_string(),
         };

@@ -137,6 +137,7 @@ impl Decoder {
             // Matroska and others only know the container duration (in AV_TIME_BASE = µs).
             _ => (input.duration() > 0).then(|| input.duration().saturating_mul(1000)),
         };
+        let frames_declared = (stream.frames() > 0).then(|| stream.frames() as u64);
         let frames_hint = match stream.frames() {
             n if n > 0 => Some(n as u64),
             _ => duration_ns
@@ -170,6 +171,7 @@ impl Decoder {
             fps,
             duration_ns,
             frames_hint,
+            frames_declared,
             codec: codec_id.name().to_string(),
             container: input.format().name().to_string(),
         };

@@ -155,6 +155,9 @@ pub struct VideoInfo {
     pub duration_ns: Option<i64>,
     /// Source frame count as stored or estimated from duration × fps; may be off.
     pub frames_hint: Option<u64>,
+    /// Frame count the container itself declares (MP4's sample count), if any: decoding
+    /// fewer frames than this means the file is truncated or corrupt.
+    pub frames_declared: Option<u64>,
     /// Codec name as FFmpeg spells it (`h264`, `vp9`, `av1`, ...) or `png`/`jpeg` for folders.
     pub codec: String,
     /// Demuxer name (`mov,mp4,m4a,3gp,3g2,mj2`, `matroska,webm`, ...) or `image_folder`.
