@@ -119,3 +119,58 @@ fn missing_domain_and_bad_arguments_are_clear() {
     );
     assert_eq!(out.status.code(), Some(2), "clap usage error");
 }
+
+#[test]
+fn maintenance_commands_each_make_one_version() {
+    let dir = tempfile::tempdir().unwrap();
+    let ds = dir.path().join("ds");
+    let ds = path_str(&ds);
+    let a = clip_with_sidecar(dir.path(), "a.mp4", 6, "human", 4);
+    let b = clip_with_sidecar(dir.path(), "b.mp4", 7, "robot", 5);
+    let c = clip_with_sidecar(dir.path(), "c.avi", 8, "robot", 6);
+    for clip in [&a, &b, &c] {
+        let (code, r) = ingest(&[ds, path_str(clip)]);
+        assert_eq!(code, 0, "{r}");
+    }
+    let victim = ingest(&[ds, path_str(&b)]).1["skipped"][0]["episode_id"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let r = ds_json(&["delete-episodes", ds, &victim]);
+    assert_eq!(r["version"], 4);
+    let info = ds_json(&["info", ds]);
+    assert_eq!(
+        (info["episodes"].as_u64(), info["frames"].as_u64()),
+        (Some(2), Some(14))
+    );
+    assert_eq!(ds_json(&["info", &format!("{ds}@3")])["frames"], 21);
+
+    let r = ds_json(&["compact", ds]);
+    assert_eq!(r["version"], 5);
+    let info = ds_json(&["info", ds]);
+    assert_eq!(info["tables"]["frames"]["files"], 1);
+    assert_eq!(info["frames"], 14);
+
+    let out = run(ds_bin(), &["compact", &format!("{ds}@2")]);
+    assert!(!out.status.success(), "writes to an old version are refused");
+    let v = ds_json(&["verify", ds]);
+    assert!(v["problems"].as_array().unwrap().is_empty(), "{v}");
+    let log = ds_json(&["log", ds]);
+    let ops: Vec<&str> = log
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["operation"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        ops,
+        [
+            "create",
+            "ingest",
+            "ingest",
+            "ingest",
+            "delete-episodes",
+            "compact"
+        ]
+    );
+}

@@ -60,8 +60,11 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
-    /// Deletes data files that no version younger than --retain-hours needs, and files
-    /// left by writers that died before committing. Older versions become unreadable.
+    /// Deletes data files that no version younger than --retain-hours needs, files left by
+    /// writers that died before committing, and their stale resume journals. Older
+    /// versions become unreadable. A retention shorter than a running ingest can delete
+    /// that ingest's new files: it then fails its commit (nothing half-committed) and must
+    /// be re-run.
     Vacuum {
         dataset: DatasetRef,
         #[arg(long, default_value_t = 168)]

@@ -308,7 +308,14 @@ impl Dataset {
 }
 
 pub(crate) fn open_parquet(path: &Path, columns: Option<&[String]>) -> Result<ParquetRecordBatchReader> {
-    let file = File::open(path).map_err(Error::io("open shard", path))?;
+    let file = File::open(path).map_err(|e| match e.kind() {
+        std::io::ErrorKind::NotFound => Error::Invalid(format!(
+            "data file missing (removed by `milv-ds vacuum`? versions older than its retention \
+             are no longer readable): {}",
+            path.display()
+        )),
+        _ => Error::io("open shard", path)(e),
+    })?;
     let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(Error::parquet(path))?;
     let builder = match columns {
         Some(cols) => {

@@ -399,7 +399,37 @@ pub fn compact(ds: &Dataset, opts: &ShardOptions, meta: CommitMeta) -> Result<(u
 /// full mode, which also removes files of writers that died before committing).
 pub fn vacuum(ds: &Dataset, retain_hours: u64, dry_run: bool) -> Result<Vec<String>> {
     ds.roll_forward()?;
-    ds.vacuum_tables(retain_hours, dry_run)
+    let mut deleted = ds.vacuum_tables(retain_hours, dry_run)?;
+    deleted.extend(vacuum_journals(ds, retain_hours, dry_run)?);
+    Ok(deleted)
+}
+
+/// Resume journals of ingests that never finished, older than the retention and not held
+/// (locked) by a running ingest.
+fn vacuum_journals(ds: &Dataset, retain_hours: u64, dry_run: bool) -> Result<Vec<String>> {
+    let dir = ds.root().join("_milv/staging");
+    let Ok(rd) = std::fs::read_dir(&dir) else {
+        return Ok(Vec::new());
+    };
+    let retain = std::time::Duration::from_secs(retain_hours * 3600);
+    let mut out = Vec::new();
+    for ent in rd.flatten() {
+        let path = ent.path();
+        let old = ent
+            .metadata()
+            .and_then(|m| m.modified())
+            .ok()
+            .and_then(|t| t.elapsed().ok())
+            .is_some_and(|age| age >= retain);
+        let unlocked = std::fs::File::open(&path).is_ok_and(|f| f.try_lock().is_ok());
+        if old && unlocked {
+            if !dry_run {
+                std::fs::remove_file(&path).map_err(Error::io("remove journal", &path))?;
+            }
+            out.push(format!("_milv/staging/{}", ent.file_name().to_string_lossy()));
+        }
+    }
+    Ok(out)
 }
 
 /// Keeps only the rows of `batch` whose `episode_id` is in `keep`.
