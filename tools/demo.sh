@@ -21,10 +21,20 @@ echo "== milv-ds log"
 "$BIN/milv-ds" log "$DS"
 echo "== milv-ds verify"
 "$BIN/milv-ds" verify "$DS"
+echo "== the same tables read by polars (no MILV code involved)"
+.venv/bin/python - "$DS" <<'PY'
+import os, sys
+import polars as pl
+eps = pl.read_delta(f"{sys.argv[1]}/episodes")
+print(eps.group_by("domain", "kind").agg(pl.len().alias("episodes"), pl.col("n_frames").sum()).sort("domain", "kind"))
+sys.stdout.flush()
+os._exit(0)  # the deltalake reader can abort at interpreter exit (upstream issue)
+PY
 
 cat <<TXT
 
 Outputs:
   dataset           $DS   (Delta tables: $DS/episodes, $DS/frames; version log: $DS/_milv/versions)
   read it elsewhere .venv/bin/python -c "import polars as pl; print(pl.read_delta('$DS/frames').head())"
+  inspect           target/debug/milv-ds info|log|verify $DS[@VERSION]
 TXT
