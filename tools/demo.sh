@@ -13,6 +13,8 @@ mkdir -p "$OUT"
 
 echo "== milv-ingest: bundled samples (samples/manifest.jsonl)"
 "$BIN/milv-ingest" "$DS" --manifest samples/manifest.jsonl
+echo "== milv-ingest: simulated tabletop episodes (samples/sim, made by milv-sim gen)"
+"$BIN/milv-ingest" "$DS" --manifest samples/sim/manifest.jsonl --require-actions
 echo "== milv-ingest again: a no-op (episode ids are content hashes)"
 "$BIN/milv-ingest" "$DS" --manifest samples/manifest.jsonl
 echo "== milv-ds info"
@@ -37,4 +39,5 @@ Outputs:
   dataset           $DS   (Delta tables: $DS/episodes, $DS/frames; version log: $DS/_milv/versions)
   read it elsewhere .venv/bin/python -c "import polars as pl; print(pl.read_delta('$DS/frames').head())"
   inspect           target/debug/milv-ds info|log|verify $DS[@VERSION]
+  the two domains   samples/contact_sheet.png (rows: human / robot, same motion)
 TXT
