@@ -29,11 +29,11 @@ fn generated_episodes_ingest_cleanly_and_are_deterministic() {
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     let report = stdout_json(&r);
     let eps = report["episodes"].as_array().unwrap();
-    assert_eq!(eps.len(), 4);
+    assert_eq!(eps.len(), 6);
     // Human demos come from the expert: they succeed.
     assert!(
         eps.iter()
-            .filter(|e| e["path"].as_str().unwrap().starts_with("human"))
+            .filter(|e| e["path"].as_str().unwrap().contains("_human_"))
             .all(|e| e["success"] == true)
     );
 
@@ -45,10 +45,11 @@ fn generated_episodes_ingest_cleanly_and_are_deterministic() {
         "--require-actions",
     ]);
     assert_eq!(code, 0, "{ing}");
-    assert_eq!(ing["frames"], 4 * 51);
+    assert_eq!(ing["frames"], 6 * 51);
     let info = ds_json(&["info", path_str(&ds)]);
     assert_eq!(info["by_domain_kind"]["human/demo"], 2);
     assert_eq!(info["by_domain_kind"]["robot/random"], 2);
+    assert_eq!(info["by_domain_kind"]["robot/demo"], 2);
     assert!(
         ds_json(&["verify", path_str(&ds)])["problems"]
             .as_array()
@@ -69,7 +70,11 @@ fn generated_episodes_ingest_cleanly_and_are_deterministic() {
         path_str(&again),
     ];
     assert!(run(sim_bin(), &args2).status.success());
-    for name in ["human_demo_0000.json", "robot_random_0001.json", "manifest.jsonl"] {
+    for name in [
+        "drawing_human_demo_0000.json",
+        "drawing_robot_random_0001.json",
+        "manifest.jsonl",
+    ] {
         assert_eq!(
             std::fs::read(out.join(name)).unwrap(),
             std::fs::read(again.join(name)).unwrap(),
@@ -92,4 +97,45 @@ fn eval_expert_bounds() {
     let random: u64 = rows.iter().map(|r| r["random_success"].as_u64().unwrap()).sum();
     assert!(expert >= 11 * 95 / 100, "{expert}");
     assert!(random <= 2, "{random}");
+}
+
+#[test]
+fn pushing_episodes_generate_and_ingest() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("push");
+    let args = [
+        "gen",
+        "--task",
+        "pushing",
+        "--split",
+        "test",
+        "--episodes",
+        "2",
+        "--size",
+        "48",
+        "--out",
+        path_str(&out),
+        "--json",
+    ];
+    let r = run(sim_bin(), &args);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let report = stdout_json(&r);
+    let eps = report["episodes"].as_array().unwrap();
+    assert!(
+        eps.iter()
+            .filter(|e| e["path"].as_str().unwrap().contains("_human_"))
+            .all(|e| e["success"] == true)
+    );
+    let ds = dir.path().join("ds");
+    let (code, ing) = ingest(&[path_str(&ds), "--manifest", path_str(&out.join("manifest.jsonl"))]);
+    assert_eq!(code, 0, "{ing}");
+    let info = ds_json(&["info", path_str(&ds)]);
+    assert_eq!(info["episodes"], 6);
+    assert!(
+        info["by_task"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .all(|k| k.starts_with("push/"))
+    );
 }

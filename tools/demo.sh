@@ -14,7 +14,7 @@ mkdir -p "$OUT"
 echo "== milv-ingest: bundled samples (samples/manifest.jsonl)"
 "$BIN/milv-ingest" "$DS" --manifest samples/manifest.jsonl
 echo "== milv-ingest: simulated tabletop episodes (samples/sim, made by milv-sim gen)"
-"$BIN/milv-ingest" "$DS" --manifest samples/sim/manifest.jsonl --require-actions
+"$BIN/milv-ingest" "$DS" --manifest samples/sim/drawing/manifest.jsonl --manifest samples/sim/pushing/manifest.jsonl --require-actions
 echo "== milv-ingest again: a no-op (episode ids are content hashes)"
 "$BIN/milv-ingest" "$DS" --manifest samples/manifest.jsonl
 echo "== milv-ds info"

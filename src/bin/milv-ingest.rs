@@ -38,9 +38,10 @@ struct Args {
     dataset: PathBuf,
     /// Video files or folders of numbered PNG/JPEG frames.
     inputs: Vec<PathBuf>,
-    /// A manifest listing many inputs (JSON lines or CSV; keys: path, sidecar, domain, kind, task_id, task_family, pair_id, split, fps).
+    /// A manifest listing many inputs (JSON lines or CSV; keys: path, sidecar, domain, kind,
+    /// task_id, task_family, pair_id, split, fps). Repeatable.
     #[arg(long)]
-    manifest: Option<PathBuf>,
+    manifest: Vec<PathBuf>,
     /// Sidecar for the (single) input, instead of looking beside it.
     #[arg(long)]
     sidecar: Option<PathBuf>,
@@ -118,7 +119,7 @@ impl Progress for Bars {
 
 fn run(args: Args) -> anyhow::Result<u8> {
     let mut inputs: Vec<InputSpec> = args.inputs.iter().map(InputSpec::new).collect();
-    if let Some(m) = &args.manifest {
+    for m in &args.manifest {
         inputs.extend(milv::ingest::manifest::read(m)?);
     }
     if inputs.is_empty() {

@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{Context as _, bail};
+use anyhow::Context as _;
 use clap::{Parser, Subcommand, ValueEnum};
 use milv::cli;
 use milv::sim::env::{Rollout, Sim, SmoothRandom, Task, expert_action, rollout};
@@ -29,15 +29,24 @@ enum Split {
     Test,
 }
 
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum Family {
+    /// Trace a red guide shape (11 train / 12 test shapes).
+    Drawing,
+    /// Push the target object into a 12×12 cm square past a distractor (10 / 8 objects).
+    Pushing,
+}
+
 #[derive(Subcommand, Debug)]
 enum Cmd {
     /// Writes episodes as MP4 (H.264) + `milv-sidecar/1` JSON + a manifest.jsonl that
-    /// `milv-ingest DATASET --manifest OUT/manifest.jsonl` reads: human expert demos and
-    /// robot random-motion clips (with actions), deterministic by seed.
+    /// `milv-ingest DATASET --manifest OUT/manifest.jsonl` reads: per task instance a
+    /// human expert demo, a robot expert demo and a robot random-motion clip (all with
+    /// actions and states), deterministic by seed.
     Gen {
-        /// Task family (only drawing so far).
-        #[arg(long, default_value = "drawing", value_parser = ["drawing"])]
-        task: String,
+        /// Task family.
+        #[arg(long, value_enum, default_value = "drawing")]
+        task: Family,
         /// Episodes per kind (human demos, robot random).
         #[arg(long, default_value_t = 4)]
         episodes: usize,
@@ -73,6 +82,8 @@ enum Cmd {
     /// Runs the scripted expert (upper bound) and a random policy (lower bound) on every
     /// shape of a split and prints the success table.
     EvalExpert {
+        #[arg(long, value_enum, default_value = "drawing")]
+        task: Family,
         #[arg(long, value_enum, default_value = "test")]
         split: Split,
         /// Random-policy trials per shape.
@@ -121,7 +132,32 @@ fn write_episode(
     Ok(())
 }
 
+/// A task: a shape placed somewhere on the table, or a pushing layout.
+fn sample_task(family: Family, split: Split, rng: &mut rand::rngs::StdRng) -> anyhow::Result<Task> {
+    match family {
+        Family::Drawing => {
+            let pool = shapes_of(split);
+            let mut shape = pool[rng.random_range(0..pool.len())].clone();
+            // Each episode places the shape elsewhere on the table, so demos of one task differ.
+            let offset = milv::sim::Vec2::new(rng.random_range(-6.0..6.0), rng.random_range(-6.0..6.0));
+            for p in &mut shape.path {
+                *p += offset;
+            }
+            Ok(Task::Drawing { shape })
+        }
+        Family::Pushing => {
+            let (train, test) = milv::sim::push::object_catalog();
+            let objs = match split {
+                Split::Train => train,
+                Split::Test => test,
+            };
+            milv::sim::env::pushing_task(&objs, rng).context("object catalogue too small")
+        }
+    }
+}
+
 fn generate(
+    family: Family,
     split: Split,
     episodes: usize,
     seed: u64,
@@ -129,23 +165,22 @@ fn generate(
     out: &Path,
 ) -> anyhow::Result<Vec<serde_json::Value>> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let pool = shapes_of(split);
     let split_name = match split {
         Split::Train => "train",
         Split::Test => "test",
     };
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let mut manifest = Vec::new();
-    let pb = cli::bar(2 * episodes as u64, "episodes");
+    let pb = cli::bar(3 * episodes as u64, "episodes");
     for i in 0..episodes {
-        let mut shape = pool[rng.random_range(0..pool.len())].clone();
-        // Each episode places the shape elsewhere on the table, so demos of one task differ.
-        let offset = milv::sim::Vec2::new(rng.random_range(-6.0..6.0), rng.random_range(-6.0..6.0));
-        for p in &mut shape.path {
-            *p += offset;
-        }
-        let task = Task::Drawing { shape };
-        for (domain, kind) in [(Domain::Human, "demo"), (Domain::Robot, "random")] {
+        let task = sample_task(family, split, &mut rng)?;
+        // Human demos (MILV's training data), robot demos (only the DAML baseline uses
+        // them) and robot random motion (A-CycleGAN's inverse dynamics).
+        for (domain, kind) in [
+            (Domain::Human, "demo"),
+            (Domain::Robot, "demo"),
+            (Domain::Robot, "random"),
+        ] {
             let sim = Sim::reset(task.clone(), domain, size).context("empty shape")?;
             let r = if kind == "demo" {
                 rollout(sim, expert_action)
@@ -153,7 +188,7 @@ fn generate(
                 let mut policy = SmoothRandom::new(seed.wrapping_mul(1_000_003).wrapping_add(i as u64));
                 rollout(sim, |s| policy.act(s))
             };
-            let name = format!("{}_{kind}_{i:04}", domain.name());
+            let name = format!("{}_{}_{kind}_{i:04}", task.family(), domain.name());
             let meta = serde_json::json!({
                 "domain": domain.name(), "kind": kind, "task_id": task.id(),
                 "task_family": task.family(), "split": split_name,
@@ -176,19 +211,25 @@ fn generate(
 }
 
 fn contact_sheet(size: u32, out: &Path) -> anyhow::Result<()> {
-    let picks = [0usize, 4, 9, 10];
+    let train = shapes::training_shapes();
+    let mut tasks: Vec<Task> = [0usize, 4, 9]
+        .iter()
+        .map(|&i| Task::Drawing {
+            shape: train[i].clone(),
+        })
+        .collect();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+    for _ in 0..2 {
+        tasks.push(sample_task(Family::Pushing, Split::Train, &mut rng)?);
+    }
     let times = [0usize, 12, 25, 37, 50];
     let cols = times.len() as u32;
-    let rows = (picks.len() * 2) as u32;
+    let rows = (tasks.len() * 2) as u32;
     let mut sheet = image::RgbImage::new(cols * size, rows * size);
-    let train = shapes::training_shapes();
-    for (pi, &s) in picks.iter().enumerate() {
+    for (pi, task) in tasks.iter().enumerate() {
         for (di, domain) in [Domain::Human, Domain::Robot].into_iter().enumerate() {
-            let task = Task::Drawing {
-                shape: train[s].clone(),
-            };
             let r = rollout(
-                Sim::reset(task, domain, size).context("empty shape")?,
+                Sim::reset(task.clone(), domain, size).context("empty task")?,
                 expert_action,
             );
             for (ti, &t) in times.iter().enumerate() {
@@ -216,10 +257,7 @@ fn run(args: Args) -> anyhow::Result<u8> {
             out,
             json,
         } => {
-            if task != "drawing" {
-                bail!("task {task}: only drawing is available");
-            }
-            let m = generate(split, episodes, seed, size, &out)?;
+            let m = generate(task, split, episodes, seed, size, &out)?;
             if json {
                 cli::print_json(&serde_json::json!({"out": out, "episodes": m}))?;
             } else {
@@ -264,6 +302,7 @@ fn run(args: Args) -> anyhow::Result<u8> {
             println!("{}", out.display());
         }
         Cmd::EvalExpert {
+            task: family,
             split,
             trials,
             seed,
@@ -271,8 +310,16 @@ fn run(args: Args) -> anyhow::Result<u8> {
         } => {
             let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
             let mut rows = Vec::new();
-            for shape in shapes_of(split) {
-                let task = Task::Drawing { shape: shape.clone() };
+            let tasks: Vec<Task> = match family {
+                Family::Drawing => shapes_of(split)
+                    .into_iter()
+                    .map(|shape| Task::Drawing { shape })
+                    .collect(),
+                Family::Pushing => (0..16)
+                    .map(|_| sample_task(family, split, &mut rng))
+                    .collect::<anyhow::Result<_>>()?,
+            };
+            for task in tasks {
                 let expert = rollout(
                     Sim::reset(task.clone(), Domain::Robot, 32).context("empty shape")?,
                     expert_action,

@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::geom::{EPISODE_STEPS, Vec2, clamp_action, clamp_to_workspace};
+use crate::push::{self, Body, ObjSpec, PushWorld, TargetSquare};
 use crate::render::{Domain, Renderer, SceneItems};
 use crate::shapes::{self, Shape};
 
@@ -13,12 +14,67 @@ use crate::shapes::{self, Shape};
 pub enum Task {
     /// Trace the guide shape with the pen, starting at its first point.
     Drawing { shape: Shape },
+    /// Push `target` (not the distractor) into the 12×12 cm square at `square`.
+    Pushing {
+        target: ObjSpec,
+        distractor: ObjSpec,
+        square: Vec2,
+        target_start: Vec2,
+        distractor_start: Vec2,
+        pusher_start: Vec2,
+    },
+}
+
+/// A random pushing task from an object set (the train or test catalogue): the target
+/// starts 14–22 cm from the square, the distractor away from the straight push line.
+pub fn pushing_task(objects: &[ObjSpec], rng: &mut impl rand::Rng) -> Option<Task> {
+    if objects.len() < 2 {
+        return None;
+    }
+    let ti = rng.random_range(0..objects.len());
+    let mut di = rng.random_range(0..objects.len() - 1);
+    if di >= ti {
+        di += 1;
+    }
+    let square = Vec2::new(rng.random_range(12.0..48.0), rng.random_range(12.0..48.0));
+    let mut target_start = square;
+    for _ in 0..100 {
+        let a = rng.random_range(0.0..std::f32::consts::TAU);
+        let p = square + Vec2::from_angle(a) * rng.random_range(14.0..22.0);
+        if (9.0..=51.0).contains(&p.x) && (9.0..=51.0).contains(&p.y) {
+            target_start = p;
+            break;
+        }
+    }
+    // The distractor sits off the push line and clear of the square and the target.
+    let line = (square - target_start).normalized();
+    let mut distractor_start = square + line.perp() * 16.0;
+    for _ in 0..100 {
+        let p = Vec2::new(rng.random_range(8.0..52.0), rng.random_range(8.0..52.0));
+        let along = (p - target_start).dot(line);
+        let off = (p - target_start).cross(line).abs();
+        let on_path = along > -10.0 && along < (square - target_start).len() + 10.0 && off < 11.0;
+        if !on_path && p.dist(square) > 14.0 && p.dist(target_start) > 14.0 {
+            distractor_start = p;
+            break;
+        }
+    }
+    let pusher_start = Vec2::new(rng.random_range(5.0..55.0), rng.random_range(3.0..8.0));
+    Some(Task::Pushing {
+        target: objects[ti].clone(),
+        distractor: objects[di].clone(),
+        square,
+        target_start,
+        distractor_start,
+        pusher_start,
+    })
 }
 
 impl Task {
     pub fn family(&self) -> &'static str {
         match self {
             Task::Drawing { .. } => "drawing",
+            Task::Pushing { .. } => "pushing",
         }
     }
 
@@ -26,6 +82,7 @@ impl Task {
     pub fn id(&self) -> String {
         match self {
             Task::Drawing { shape } => format!("draw/{}", shape.name),
+            Task::Pushing { target, .. } => format!("push/{}", target.name),
         }
     }
 }
@@ -38,13 +95,29 @@ pub struct Sim {
     ee: Vec2,
     trace: Vec<Vec2>,
     steps: usize,
+    /// Pushing: the objects (target first, then the distractor) and the pusher.
+    world: Option<PushWorld>,
 }
 
 impl Sim {
     /// Starts an episode; the end-effector starts at the task's start point.
     pub fn reset(task: Task, domain: Domain, image_size: u32) -> Option<Sim> {
-        let start = match &task {
-            Task::Drawing { shape } => *shape.path.first()?,
+        let (start, world) = match &task {
+            Task::Drawing { shape } => (*shape.path.first()?, None),
+            Task::Pushing {
+                target,
+                distractor,
+                target_start,
+                distractor_start,
+                pusher_start,
+                ..
+            } => {
+                let bodies = vec![
+                    Body::new(target.clone(), *target_start, 0.0),
+                    Body::new(distractor.clone(), *distractor_start, 0.0),
+                ];
+                (*pusher_start, Some(PushWorld::new(bodies, *pusher_start)))
+            }
         };
         Some(Sim {
             task,
@@ -53,6 +126,7 @@ impl Sim {
             ee: start,
             trace: vec![start],
             steps: 0,
+            world,
         })
     }
 
@@ -80,6 +154,11 @@ impl Sim {
     pub fn step(&mut self, action: Vec2) -> Vec2 {
         let before = self.ee;
         self.ee = clamp_to_workspace(self.ee + clamp_action(action));
+        if let Some(w) = &mut self.world {
+            // The pusher may stop short when an object jams against the edge.
+            w.move_pusher(self.ee);
+            self.ee = w.pusher;
+        }
         self.trace.push(self.ee);
         self.steps += 1;
         self.ee - before
@@ -93,20 +172,60 @@ impl Sim {
                 trace: &self.trace,
                 ..Default::default()
             },
+            Task::Pushing { square, .. } => {
+                let h = TargetSquare::SIZE / 2.0;
+                let c = *square;
+                SceneItems {
+                    objects: self
+                        .world
+                        .iter()
+                        .flat_map(|w| w.bodies.iter())
+                        .map(|b| (b.world_polygon(), b.spec.color))
+                        .collect(),
+                    target: Some([
+                        c + Vec2::new(-h, -h),
+                        c + Vec2::new(h, -h),
+                        c + Vec2::new(h, h),
+                        c + Vec2::new(-h, h),
+                    ]),
+                    ..Default::default()
+                }
+            }
         };
         self.renderer.render(self.ee, &items)
     }
 
-    /// The task's score so far (drawing: LCS points out of 50).
+    /// The task's score so far (drawing: LCS points out of 50; pushing: 1 when the
+    /// target's centre is in the square).
     pub fn score(&self) -> usize {
         match &self.task {
             Task::Drawing { shape } => shapes::drawing_score(&self.trace, &shape.path),
+            Task::Pushing { .. } => usize::from(self.success()),
         }
     }
 
     pub fn success(&self) -> bool {
         match &self.task {
             Task::Drawing { .. } => self.score() >= shapes::SUCCESS_LCS,
+            Task::Pushing { square, .. } => self
+                .target_body()
+                .is_some_and(|b| TargetSquare { center: *square }.contains(b.pos)),
+        }
+    }
+
+    /// Pushing: the object to push (the other one is the distractor).
+    pub fn target_body(&self) -> Option<&Body> {
+        self.world.as_ref().and_then(|w| w.bodies.first())
+    }
+
+    /// Pushing: whether the distractor was moved by more than 1 cm (a wrong-object push).
+    pub fn distractor_moved(&self) -> bool {
+        match (&self.task, &self.world) {
+            (Task::Pushing { distractor_start, .. }, Some(w)) => w
+                .bodies
+                .get(1)
+                .is_some_and(|b| b.pos.dist(*distractor_start) > 1.0),
+            _ => false,
         }
     }
 
@@ -128,6 +247,10 @@ pub fn expert_action(sim: &Sim) -> Vec2 {
                 .unwrap_or(sim.end_effector());
             next - sim.end_effector()
         }
+        Task::Pushing { square, .. } => match sim.target_body() {
+            Some(b) => push::expert_action(sim.end_effector(), b, *square, push::PUSHER_RADIUS_CM),
+            None => Vec2::ZERO,
+        },
     }
 }
 
@@ -246,6 +369,34 @@ mod tests {
             }
         }
         assert!(ok * 10 < all.len() * 3, "random succeeded {ok} times");
+    }
+
+    #[test]
+    fn the_pushing_expert_succeeds_and_random_rarely_does() {
+        use rand::SeedableRng;
+        let (train, test) = push::object_catalog();
+        let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let (mut expert_ok, mut random_ok, n) = (0, 0, 40);
+        for i in 0..n {
+            let objs = if i % 2 == 0 { &train } else { &test };
+            let task = pushing_task(objs, &mut rng).unwrap();
+            let r = rollout(
+                Sim::reset(task.clone(), Domain::Robot, 16).unwrap(),
+                expert_action,
+            );
+            expert_ok += usize::from(r.success);
+            let mut policy = SmoothRandom::new(i as u64);
+            let r = rollout(Sim::reset(task, Domain::Robot, 16).unwrap(), |s| policy.act(s));
+            random_ok += usize::from(r.success);
+        }
+        assert!(
+            expert_ok * 100 >= n * 95,
+            "expert pushed {expert_ok}/{n} into the square"
+        );
+        assert!(
+            random_ok * 5 <= n,
+            "random pushed {random_ok}/{n} into the square"
+        );
     }
 
     #[test]
