@@ -29,7 +29,7 @@ fn generated_episodes_ingest_cleanly_and_are_deterministic() {
     assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     let report = stdout_json(&r);
     let eps = report["episodes"].as_array().unwrap();
-    assert_eq!(eps.len(), 6);
+    assert_eq!(eps.len(), 10);
     // Human demos come from the expert: they succeed.
     assert!(
         eps.iter()
@@ -45,11 +45,22 @@ fn generated_episodes_ingest_cleanly_and_are_deterministic() {
         "--require-actions",
     ]);
     assert_eq!(code, 0, "{ing}");
-    assert_eq!(ing["frames"], 6 * 51);
+    let paired_robot_frames: u64 = std::fs::read_to_string(out.join("warps.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| {
+            serde_json::from_str::<serde_json::Value>(l).unwrap()["robot_frames"]
+                .as_u64()
+                .unwrap()
+        })
+        .sum();
+    assert_eq!(ing["frames"].as_u64().unwrap(), 8 * 51 + paired_robot_frames);
     let info = ds_json(&["info", path_str(&ds)]);
     assert_eq!(info["by_domain_kind"]["human/demo"], 2);
     assert_eq!(info["by_domain_kind"]["robot/random"], 2);
     assert_eq!(info["by_domain_kind"]["robot/demo"], 2);
+    assert_eq!(info["by_domain_kind"]["human/paired"], 2);
+    assert_eq!(info["by_domain_kind"]["robot/paired"], 2);
     assert!(
         ds_json(&["verify", path_str(&ds)])["problems"]
             .as_array()
@@ -130,7 +141,7 @@ fn pushing_episodes_generate_and_ingest() {
     let (code, ing) = ingest(&[path_str(&ds), "--manifest", path_str(&out.join("manifest.jsonl"))]);
     assert_eq!(code, 0, "{ing}");
     let info = ds_json(&["info", path_str(&ds)]);
-    assert_eq!(info["episodes"], 6);
+    assert_eq!(info["episodes"], 10);
     assert!(
         info["by_task"]
             .as_object()

@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 use clap::{Parser, Subcommand, ValueEnum};
 use milv::cli;
-use milv::sim::env::{Rollout, Sim, SmoothRandom, Task, expert_action, rollout};
+use milv::sim::env::{Rollout, Sim, SmoothRandom, Task, expert_action, paired_clips, rollout};
 use milv::sim::render::Domain;
 use milv::sim::shapes::{self, Shape};
 use milv::video::{Codec, VideoWriter};
@@ -41,8 +41,11 @@ enum Family {
 enum Cmd {
     /// Writes episodes as MP4 (H.264) + `milv-sidecar/1` JSON + a manifest.jsonl that
     /// `milv-ingest DATASET --manifest OUT/manifest.jsonl` reads: per task instance a
-    /// human expert demo, a robot expert demo and a robot random-motion clip (all with
-    /// actions and states), deterministic by seed.
+    /// human expert demo, a robot expert demo and a robot random-motion clip, and a loosely
+    /// paired human/robot pair (same motion, random monotone time warps, different
+    /// lengths), all with actions and states; deterministic by seed. Also writes
+    /// `warps.jsonl` (ground-truth frame correspondence of each pair) and
+    /// `ground_truth.jsonl` (robot demo = ground-truth robot rendering of each human demo).
     Gen {
         /// Task family.
         #[arg(long, value_enum, default_value = "drawing")]
@@ -171,7 +174,9 @@ fn generate(
     };
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let mut manifest = Vec::new();
-    let pb = cli::bar(3 * episodes as u64, "episodes");
+    let mut ground_truth = Vec::new();
+    let mut warps = Vec::new();
+    let pb = cli::bar(4 * episodes as u64, "episodes");
     for i in 0..episodes {
         let task = sample_task(family, split, &mut rng)?;
         // Human demos (MILV's training data), robot demos (only the DAML baseline uses
@@ -200,8 +205,39 @@ fn generate(
             );
             pb.inc(1);
         }
+        // The human demo and the robot demo of one instance share every state: frame k of
+        // the robot demo is the ground-truth robot rendering of frame k of the human demo.
+        let stem = format!("{}_{{}}_demo_{i:04}", task.family());
+        ground_truth.push(serde_json::json!({
+            "human": format!("{}.mp4", stem.replace("{}", "human")),
+            "robot": format!("{}.mp4", stem.replace("{}", "robot")),
+        }));
+        // Loosely paired clips: the same motion at different speeds and lengths.
+        let robot_len = rng.random_range(36..=51);
+        let pair = paired_clips(&task, size, 51, robot_len, &mut rng).context("empty task")?;
+        let pair_id = format!("{}-{seed}-{i:04}", task.family());
+        for (domain, r) in [(Domain::Human, &pair.human), (Domain::Robot, &pair.robot)] {
+            let name = format!("{}_{}_paired_{i:04}", task.family(), domain.name());
+            let meta = serde_json::json!({
+                "domain": domain.name(), "kind": "paired", "task_id": task.id(),
+                "task_family": task.family(), "split": split_name, "pair_id": pair_id,
+            });
+            write_episode(out, &name, r, size, meta)?;
+            manifest.push(
+                serde_json::json!({"path": format!("{name}.mp4"), "sidecar": format!("{name}.json"),
+                "success": r.success, "score": r.score}),
+            );
+        }
+        warps.push(
+            serde_json::json!({"pair_id": pair_id, "human_frames": pair.human.frames.len(),
+            "robot_frames": pair.robot.frames.len(), "human_to_robot": pair.human_to_robot}),
+        );
+        pb.inc(1);
     }
     pb.finish_and_clear();
+    let jsonl = |rows: &[serde_json::Value]| rows.iter().map(|r| r.to_string() + "\n").collect::<String>();
+    std::fs::write(out.join("ground_truth.jsonl"), jsonl(&ground_truth))?;
+    std::fs::write(out.join("warps.jsonl"), jsonl(&warps))?;
     let lines: Vec<String> = manifest
         .iter()
         .map(|m| serde_json::json!({"path": m["path"], "sidecar": m["sidecar"]}).to_string())

@@ -328,6 +328,117 @@ impl SmoothRandom {
     }
 }
 
+/// A random monotone time warp: progress in [0, 1] at each of `len` frames, starting at 0,
+/// ending at 1, with per-frame speed varying smoothly between about 0.5× and 1.5× average.
+pub fn time_warp(len: usize, rng: &mut impl rand::Rng) -> Vec<f32> {
+    if len < 2 {
+        return vec![0.0; len];
+    }
+    let mut speed = 1.0f32;
+    let mut acc = vec![0.0f32];
+    for _ in 1..len {
+        speed = (speed + rng.random_range(-0.25..0.25)).clamp(0.5, 1.5);
+        let last = acc.last().copied().unwrap_or(0.0);
+        acc.push(last + speed);
+    }
+    let total = acc.last().copied().unwrap_or(1.0).max(1e-6);
+    acc.iter().map(|a| a / total).collect()
+}
+
+/// Points of `path` at the given progress values (arc-length parameterised).
+pub fn positions_at(path: &[Vec2], progress: &[f32]) -> Vec<Vec2> {
+    const FINE: usize = 1001;
+    let fine = shapes::resample(path, FINE);
+    progress
+        .iter()
+        .map(|&s| {
+            let k = (s.clamp(0.0, 1.0) * (FINE - 1) as f32).round() as usize;
+            fine.get(k).copied().unwrap_or(Vec2::ZERO)
+        })
+        .collect()
+}
+
+/// Ground-truth correspondence of two warps of one motion: for each frame of `a`, the
+/// frame of `b` at the nearest progress (monotone, since both warps are).
+pub fn warp_correspondence(a: &[f32], b: &[f32]) -> Vec<usize> {
+    let mut j = 0;
+    a.iter()
+        .map(|&s| {
+            while j + 1 < b.len() && (b[j + 1] - s).abs() <= (b[j] - s).abs() {
+                j += 1;
+            }
+            j
+        })
+        .collect()
+}
+
+/// Replays end-effector positions (`positions[0]` must be the start): one step per
+/// position after the first, so the rollout has `positions.len()` frames.
+pub fn replay(mut sim: Sim, positions: &[Vec2]) -> Rollout {
+    let mut out = Rollout {
+        frames: Vec::with_capacity(positions.len()),
+        actions: Vec::with_capacity(positions.len()),
+        states: Vec::with_capacity(positions.len()),
+        success: false,
+        score: 0,
+    };
+    for next in positions.iter().skip(1) {
+        out.frames.push(sim.observe());
+        out.states.push(sim.state());
+        let applied = sim.step(*next - sim.end_effector());
+        out.actions.push([applied.x, applied.y]);
+    }
+    out.frames.push(sim.observe());
+    out.states.push(sim.state());
+    out.actions.push([0.0, 0.0]);
+    out.success = sim.success();
+    out.score = sim.score();
+    out
+}
+
+/// The same motion in both domains at different speeds and lengths: the expert's
+/// end-effector path, replayed through a random monotone time warp per domain.
+pub struct PairedClips {
+    pub human: Rollout,
+    pub robot: Rollout,
+    /// For each human frame, the robot frame showing the same point of the motion.
+    pub human_to_robot: Vec<usize>,
+}
+
+/// Records the expert's path on `task`, then replays it warped: `human_len` and
+/// `robot_len` frames.
+pub fn paired_clips(
+    task: &Task,
+    image_size: u32,
+    human_len: usize,
+    robot_len: usize,
+    rng: &mut impl rand::Rng,
+) -> Option<PairedClips> {
+    let reference = Sim::reset(task.clone(), Domain::Robot, 8)?;
+    let mut path = vec![reference.end_effector()];
+    let mut sim = reference;
+    while !sim.done() {
+        let a = expert_action(&sim);
+        sim.step(a);
+        path.push(sim.end_effector());
+    }
+    let wh = time_warp(human_len, rng);
+    let wr = time_warp(robot_len, rng);
+    let human = replay(
+        Sim::reset(task.clone(), Domain::Human, image_size)?,
+        &positions_at(&path, &wh),
+    );
+    let robot = replay(
+        Sim::reset(task.clone(), Domain::Robot, image_size)?,
+        &positions_at(&path, &wr),
+    );
+    Some(PairedClips {
+        human,
+        robot,
+        human_to_robot: warp_correspondence(&wh, &wr),
+    })
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
@@ -397,6 +508,31 @@ mod tests {
             random_ok * 5 <= n,
             "random pushed {random_ok}/{n} into the square"
         );
+    }
+
+    #[test]
+    fn warps_are_monotone_and_correspondences_recover_them() {
+        use rand::SeedableRng;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(2);
+        let w = time_warp(40, &mut rng);
+        assert_eq!((w[0], w[39]), (0.0, 1.0));
+        assert!(w.windows(2).all(|p| p[1] > p[0]));
+        let c = warp_correspondence(&w, &w);
+        assert_eq!(c, (0..40).collect::<Vec<_>>());
+        let shape = shapes::training_shapes()[5].clone();
+        let p = paired_clips(&Task::Drawing { shape }, 16, 51, 37, &mut rng).unwrap();
+        assert_eq!((p.human.frames.len(), p.robot.frames.len()), (51, 37));
+        assert_eq!(p.human_to_robot.len(), 51);
+        assert_eq!((p.human_to_robot[0], p.human_to_robot[50]), (0, 36));
+        assert!(p.human_to_robot.windows(2).all(|w| w[1] >= w[0]));
+        // Corresponding frames show nearby end-effector positions in both domains.
+        for (i, &j) in p.human_to_robot.iter().enumerate() {
+            let (h, r) = (p.human.states[i], p.robot.states[j]);
+            assert!(
+                Vec2::new(h[0], h[1]).dist(Vec2::new(r[0], r[1])) < 3.0,
+                "frame {i}->{j}"
+            );
+        }
     }
 
     #[test]
