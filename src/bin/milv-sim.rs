@@ -7,7 +7,7 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 use clap::{Parser, Subcommand, ValueEnum};
 use milv::cli;
-use milv::sim::env::{Rollout, Sim, SmoothRandom, Task, expert_action, paired_clips, rollout};
+use milv::sim::env::{Rollout, Sim, SmoothRandom, Task, evaluate, expert_action, paired_clips, rollout};
 use milv::sim::render::Domain;
 use milv::sim::shapes::{self, Shape};
 use milv::video::{Codec, VideoWriter};
@@ -355,38 +355,41 @@ fn run(args: Args) -> anyhow::Result<u8> {
                     .map(|_| sample_task(family, split, &mut rng))
                     .collect::<anyhow::Result<_>>()?,
             };
-            for task in tasks {
-                let expert = rollout(
-                    Sim::reset(task.clone(), Domain::Robot, 32).context("empty shape")?,
-                    expert_action,
-                );
-                let mut random_ok = 0;
-                for _ in 0..trials {
-                    let sim = Sim::reset(task.clone(), Domain::Robot, 32).context("empty shape")?;
-                    let r = rollout(sim, |_| {
-                        milv::sim::Vec2::new(rng.random_range(-5.0..5.0), rng.random_range(-5.0..5.0))
-                    });
-                    random_ok += usize::from(r.success);
-                }
+            let expert =
+                evaluate(&tasks, 1, Domain::Robot, 32, |_, _| expert_action).context("empty task")?;
+            let random = evaluate(&tasks, trials, Domain::Robot, 32, |_, _| {
+                let mut r = rand::rngs::StdRng::seed_from_u64(rng.random());
+                move |_: &Sim| milv::sim::Vec2::new(r.random_range(-5.0..5.0), r.random_range(-5.0..5.0))
+            })
+            .context("empty task")?;
+            for (e, r) in expert.per_task.iter().zip(&random.per_task) {
                 rows.push(
-                    serde_json::json!({"task": task.id(), "expert_success": expert.success,
-                    "expert_lcs": expert.score, "random_success": random_ok, "random_trials": trials}),
+                    serde_json::json!({"task": e.task, "expert_success": e.successes == e.trials,
+                    "random_success": r.successes, "random_trials": r.trials}),
                 );
             }
             if json {
                 cli::print_json(&rows)?;
             } else {
-                println!("{:<28} {:>8} {:>6} {:>10}", "task", "expert", "lcs", "random");
+                println!("{:<28} {:>8} {:>10}", "task", "expert", "random");
                 for r in &rows {
                     println!(
-                        "{:<28} {:>8} {:>6} {:>7}/{}",
+                        "{:<28} {:>8} {:>7}/{}",
                         r["task"].as_str().unwrap_or("?"),
                         r["expert_success"],
-                        r["expert_lcs"],
                         r["random_success"],
                         r["random_trials"]
                     );
                 }
+                println!(
+                    "overall: expert {}/{} ({:.0} %), random {}/{} ({:.0} %)",
+                    expert.successes,
+                    expert.trials,
+                    100.0 * expert.success_rate(),
+                    random.successes,
+                    random.trials,
+                    100.0 * random.success_rate()
+                );
             }
         }
     }

@@ -439,6 +439,65 @@ pub fn paired_clips(
     })
 }
 
+/// Success of one task over its trials.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TaskResult {
+    pub task: String,
+    pub successes: usize,
+    pub trials: usize,
+}
+
+/// What [`evaluate`] returns: per task and overall.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EvalReport {
+    pub per_task: Vec<TaskResult>,
+    pub successes: usize,
+    pub trials: usize,
+}
+
+impl EvalReport {
+    pub fn success_rate(&self) -> f64 {
+        if self.trials == 0 {
+            0.0
+        } else {
+            self.successes as f64 / self.trials as f64
+        }
+    }
+}
+
+/// The paper's protocol: for every task, `trials` episodes of 50 steps in `domain`, each
+/// with a fresh policy from `make_policy(task, trial)` (where a one-shot learner adapts
+/// to the task's demonstration).
+pub fn evaluate<P: FnMut(&Sim) -> Vec2>(
+    tasks: &[Task],
+    trials: usize,
+    domain: Domain,
+    image_size: u32,
+    mut make_policy: impl FnMut(&Task, usize) -> P,
+) -> Option<EvalReport> {
+    let mut per_task = Vec::with_capacity(tasks.len());
+    for task in tasks {
+        let mut successes = 0;
+        for trial in 0..trials {
+            let r = rollout(
+                Sim::reset(task.clone(), domain, image_size)?,
+                make_policy(task, trial),
+            );
+            successes += usize::from(r.success);
+        }
+        per_task.push(TaskResult {
+            task: task.id(),
+            successes,
+            trials,
+        });
+    }
+    Some(EvalReport {
+        successes: per_task.iter().map(|t| t.successes).sum(),
+        trials: per_task.iter().map(|t| t.trials).sum(),
+        per_task,
+    })
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
@@ -533,6 +592,21 @@ mod tests {
                 "frame {i}->{j}"
             );
         }
+    }
+
+    #[test]
+    fn evaluate_counts_per_task_and_overall() {
+        let tasks: Vec<Task> = shapes::test_shapes()
+            .into_iter()
+            .take(3)
+            .map(|shape| Task::Drawing { shape })
+            .collect();
+        let expert = evaluate(&tasks, 2, Domain::Robot, 16, |_, _| expert_action).unwrap();
+        assert_eq!((expert.successes, expert.trials), (6, 6));
+        assert_eq!(expert.per_task.len(), 3);
+        let still = evaluate(&tasks, 2, Domain::Robot, 16, |_, _| |_: &Sim| Vec2::ZERO).unwrap();
+        assert_eq!(still.successes, 0);
+        assert_eq!(still.success_rate(), 0.0);
     }
 
     #[test]
