@@ -8,7 +8,7 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand, ValueEnum};
 use milv::cli;
 use milv::sim::env::{Rollout, Sim, SmoothRandom, Task, evaluate, expert_action, paired_clips, rollout};
-use milv::sim::render::Domain;
+use milv::sim::render::{Domain, Randomization};
 use milv::sim::shapes::{self, Shape};
 use milv::video::{Codec, VideoWriter};
 use rand::{Rng, SeedableRng};
@@ -60,6 +60,10 @@ enum Cmd {
         /// Frame size in pixels (square).
         #[arg(long, default_value_t = 128)]
         size: u32,
+        /// Randomise lighting, table texture, camera pose and clutter per episode
+        /// (demo and random clips).
+        #[arg(long)]
+        randomize: bool,
         #[arg(long)]
         out: PathBuf,
         #[arg(long)]
@@ -165,6 +169,7 @@ fn generate(
     episodes: usize,
     seed: u64,
     size: u32,
+    randomize: bool,
     out: &Path,
 ) -> anyhow::Result<Vec<serde_json::Value>> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
@@ -186,7 +191,12 @@ fn generate(
             (Domain::Robot, "demo"),
             (Domain::Robot, "random"),
         ] {
-            let sim = Sim::reset(task.clone(), domain, size).context("empty shape")?;
+            let look = if randomize {
+                Randomization::all(seed.wrapping_mul(7919).wrapping_add(i as u64))
+            } else {
+                Randomization::default()
+            };
+            let sim = Sim::reset_with(task.clone(), domain, size, &look).context("empty shape")?;
             let r = if kind == "demo" {
                 rollout(sim, expert_action)
             } else {
@@ -290,10 +300,11 @@ fn run(args: Args) -> anyhow::Result<u8> {
             seed,
             split,
             size,
+            randomize,
             out,
             json,
         } => {
-            let m = generate(task, split, episodes, seed, size, &out)?;
+            let m = generate(task, split, episodes, seed, size, randomize, &out)?;
             if json {
                 cli::print_json(&serde_json::json!({"out": out, "episodes": m}))?;
             } else {

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::geom::{EPISODE_STEPS, Vec2, clamp_action, clamp_to_workspace};
 use crate::push::{self, Body, ObjSpec, PushWorld, TargetSquare};
-use crate::render::{Domain, Renderer, SceneItems};
+use crate::render::{Domain, Randomization, Renderer, SceneItems};
 use crate::shapes::{self, Shape};
 
 /// A task instance.
@@ -102,6 +102,11 @@ pub struct Sim {
 impl Sim {
     /// Starts an episode; the end-effector starts at the task's start point.
     pub fn reset(task: Task, domain: Domain, image_size: u32) -> Option<Sim> {
+        Sim::reset_with(task, domain, image_size, &Randomization::default())
+    }
+
+    /// [`Sim::reset`] with a randomised look (lighting, texture, camera, clutter).
+    pub fn reset_with(task: Task, domain: Domain, image_size: u32, look: &Randomization) -> Option<Sim> {
         let (start, world) = match &task {
             Task::Drawing { shape } => (*shape.path.first()?, None),
             Task::Pushing {
@@ -122,7 +127,7 @@ impl Sim {
         Some(Sim {
             task,
             domain,
-            renderer: Renderer::new(domain, image_size)?,
+            renderer: Renderer::with_randomization(domain, image_size, look)?,
             ee: start,
             trace: vec![start],
             steps: 0,

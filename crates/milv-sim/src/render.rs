@@ -133,6 +133,33 @@ fn look(domain: Domain) -> Look {
     }
 }
 
+/// Optional appearance randomisation (domain randomisation for robustness studies).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Randomization {
+    pub seed: u64,
+    /// Brightness and colour cast of the whole scene.
+    pub lighting: bool,
+    /// Table texture colours and spacing.
+    pub texture: bool,
+    /// Camera corners moved by up to ±4 % of the image size.
+    pub camera_jitter: bool,
+    /// Up to four static clutter shapes near the table's edges.
+    pub clutter: bool,
+}
+
+impl Randomization {
+    /// Everything on, with this seed.
+    pub fn all(seed: u64) -> Self {
+        Randomization {
+            seed,
+            lighting: true,
+            texture: true,
+            camera_jitter: true,
+            clutter: true,
+        }
+    }
+}
+
 /// What is on the table besides the embodiment.
 #[derive(Clone, Debug, Default)]
 pub struct SceneItems<'a> {
@@ -152,6 +179,11 @@ pub struct Renderer {
     size: u32,
     camera: Camera,
     pixmap: Pixmap,
+    look: Look,
+    /// Texture line offset (cm) and brightness factor.
+    texture_shift: f32,
+    light: [f32; 3],
+    clutter: Vec<(Vec<Vec2>, [u8; 3])>,
 }
 
 fn paint(rgb: [u8; 3]) -> Paint<'static> {
@@ -189,11 +221,76 @@ pub fn robot_elbow(ee: Vec2) -> Vec2 {
 
 impl Renderer {
     pub fn new(domain: Domain, size: u32) -> Option<Renderer> {
+        Renderer::with_randomization(domain, size, &Randomization::default())
+    }
+
+    /// A renderer whose look is randomised as `rnd` asks (deterministic by its seed).
+    pub fn with_randomization(domain: Domain, size: u32, rnd: &Randomization) -> Option<Renderer> {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(rnd.seed ^ (domain as u64) << 32);
+        let mut camera = Camera::for_domain(domain, size);
+        if rnd.camera_jitter {
+            let w = f64::from(WORKSPACE_CM);
+            let corners = [(0.0, 0.0), (w, 0.0), (w, w), (0.0, w)].map(|(x, y)| {
+                let (u, v) = camera.project(Vec2::new(x as f32, y as f32));
+                let j = f64::from(size) * 0.04;
+                (
+                    f64::from(u) + rng.random_range(-j..j),
+                    f64::from(v) + rng.random_range(-j..j),
+                )
+            });
+            camera = Camera::from_corners(corners).unwrap_or(camera);
+        }
+        let mut lk = look(domain);
+        let mut texture_shift = 0.0;
+        if rnd.texture {
+            let tint = |c: [u8; 3], rng: &mut rand::rngs::StdRng| {
+                c.map(|v| (f32::from(v) * rng.random_range(0.85..1.15)).clamp(0.0, 255.0) as u8)
+            };
+            lk.table = tint(lk.table, &mut rng);
+            lk.texture = tint(lk.texture, &mut rng);
+            texture_shift = rng.random_range(-4.0..4.0);
+        }
+        let light = if rnd.lighting {
+            let b = rng.random_range(0.75..1.2);
+            [
+                b * rng.random_range(0.92..1.08),
+                b * rng.random_range(0.92..1.08),
+                b * rng.random_range(0.92..1.08),
+            ]
+        } else {
+            [1.0; 3]
+        };
+        let mut clutter = Vec::new();
+        if rnd.clutter {
+            for _ in 0..rng.random_range(1..=4) {
+                // Near an edge, away from where tasks happen.
+                let along = rng.random_range(4.0..56.0);
+                let c = match rng.random_range(0..4) {
+                    0 => Vec2::new(along, 3.0),
+                    1 => Vec2::new(along, 57.0),
+                    2 => Vec2::new(3.0, along),
+                    _ => Vec2::new(57.0, along),
+                };
+                let r = rng.random_range(1.0..2.5);
+                let n = rng.random_range(3..7);
+                let rot = rng.random_range(0.0..std::f32::consts::TAU);
+                let poly = (0..n)
+                    .map(|k| c + Vec2::from_angle(rot + std::f32::consts::TAU * k as f32 / n as f32) * r)
+                    .collect();
+                let grey = rng.random_range(60..200);
+                clutter.push((poly, [grey, grey, rng.random_range(60..200)]));
+            }
+        }
         Some(Renderer {
             domain,
             size,
-            camera: Camera::for_domain(domain, size),
+            camera,
             pixmap: Pixmap::new(size, size)?,
+            look: lk,
+            texture_shift,
+            light,
+            clutter,
         })
     }
 
@@ -243,7 +340,7 @@ impl Renderer {
 
     /// Renders one frame: the scene with the end-effector at `ee`; returns packed RGB24.
     pub fn render(&mut self, ee: Vec2, items: &SceneItems<'_>) -> Vec<u8> {
-        let lk = look(self.domain);
+        let lk = self.look;
         let [r, g, b] = lk.background;
         self.pixmap.fill(Color::from_rgba8(r, g, b, 255));
         let w = WORKSPACE_CM;
@@ -255,19 +352,25 @@ impl Renderer {
             // Wood grain: irregular planks along x.
             Domain::Human => {
                 for i in 1..8 {
-                    let y = i as f32 * 7.5 + (i as f32 * 1.7).sin();
+                    let y = i as f32 * 7.5 + (i as f32 * 1.7).sin() + self.texture_shift;
                     self.stroke_line(&[Vec2::new(0.0, y), Vec2::new(w, y + 0.6)], lk.texture, 0.35);
                 }
             }
             // A tiled work surface: a grid.
             Domain::Robot => {
                 for i in 1..6 {
-                    let t = i as f32 * 10.0;
+                    let t = i as f32 * 10.0 + self.texture_shift;
                     self.stroke_line(&[Vec2::new(t, 0.0), Vec2::new(t, w)], lk.texture, 0.25);
                     self.stroke_line(&[Vec2::new(0.0, t), Vec2::new(w, t)], lk.texture, 0.25);
                 }
             }
         }
+        // Taken out and put back: drawing needs `&mut self`.
+        let clutter = std::mem::take(&mut self.clutter);
+        for (poly, rgb) in &clutter {
+            self.fill_poly(poly, *rgb);
+        }
+        self.clutter = clutter;
         if let Some(t) = &items.target {
             let mut closed = t.to_vec();
             closed.push(t[0]);
@@ -285,10 +388,17 @@ impl Renderer {
             Domain::Robot => self.draw_robot(ee),
         }
         let mut out = Vec::with_capacity((self.size * self.size * 3) as usize);
+        let light = self.light;
         for px in self.pixmap.data().chunks_exact(4) {
             // Every pixel is opaque (the background covers the frame), so premultiplied
             // RGBA is plain RGBA here.
-            out.extend_from_slice(&px[..3]);
+            if light == [1.0; 3] {
+                out.extend_from_slice(&px[..3]);
+            } else {
+                for c in 0..3 {
+                    out.push((f32::from(px[c]) * light[c]).clamp(0.0, 255.0) as u8);
+                }
+            }
         }
         out
     }
@@ -371,6 +481,25 @@ mod tests {
             assert!((e.dist(ROBOT_BASE) - ROBOT_LINK_CM).abs() < 1e-3);
             assert!((e.dist(ee) - ROBOT_LINK_CM).abs() < 1e-2, "{x},{y}");
         }
+    }
+
+    #[test]
+    fn randomization_changes_the_look_deterministically() {
+        let items = SceneItems::default();
+        let ee = Vec2::new(30.0, 30.0);
+        let plain = Renderer::new(Domain::Robot, 48).unwrap().render(ee, &items);
+        let a = Renderer::with_randomization(Domain::Robot, 48, &Randomization::all(1))
+            .unwrap()
+            .render(ee, &items);
+        let a2 = Renderer::with_randomization(Domain::Robot, 48, &Randomization::all(1))
+            .unwrap()
+            .render(ee, &items);
+        let b = Renderer::with_randomization(Domain::Robot, 48, &Randomization::all(2))
+            .unwrap()
+            .render(ee, &items);
+        assert_eq!(a, a2);
+        assert_ne!(a, plain);
+        assert_ne!(a, b);
     }
 
     #[test]
