@@ -25,6 +25,27 @@ pub enum Task {
     },
 }
 
+/// The same pushing layout with a different distractor (≠ target, ≠ the current one), as
+/// the paper's test protocol asks.
+pub fn swap_distractor(task: &Task, objects: &[ObjSpec], rng: &mut impl rand::Rng) -> Option<Task> {
+    let Task::Pushing {
+        target, distractor, ..
+    } = task
+    else {
+        return None;
+    };
+    let others: Vec<&ObjSpec> = objects
+        .iter()
+        .filter(|o| o.name != target.name && o.name != distractor.name)
+        .collect();
+    let pick = others.get(rng.random_range(0..others.len().max(1)))?;
+    let mut t = task.clone();
+    if let Task::Pushing { distractor, .. } = &mut t {
+        *distractor = (*pick).clone();
+    }
+    Some(t)
+}
+
 /// A random pushing task from an object set (the train or test catalogue): the target
 /// starts 14–22 cm from the square, the distractor away from the straight push line.
 pub fn pushing_task(objects: &[ObjSpec], rng: &mut impl rand::Rng) -> Option<Task> {
@@ -612,6 +633,37 @@ mod tests {
         let still = evaluate(&tasks, 2, Domain::Robot, 16, |_, _| |_: &Sim| Vec2::ZERO).unwrap();
         assert_eq!(still.successes, 0);
         assert_eq!(still.success_rate(), 0.0);
+    }
+
+    #[test]
+    fn test_trials_get_another_distractor() {
+        use rand::SeedableRng;
+        let (_, test) = push::object_catalog();
+        let mut rng = rand::rngs::StdRng::seed_from_u64(4);
+        let demo = pushing_task(&test, &mut rng).unwrap();
+        let trial = swap_distractor(&demo, &test, &mut rng).unwrap();
+        let (
+            Task::Pushing {
+                target: t0,
+                distractor: d0,
+                ..
+            },
+            Task::Pushing {
+                target: t1,
+                distractor: d1,
+                ..
+            },
+        ) = (&demo, &trial)
+        else {
+            panic!("not pushing tasks");
+        };
+        assert_eq!(t0, t1);
+        assert_ne!(d0.name, d1.name);
+        assert_ne!(d1.name, t1.name);
+        let drawing = Task::Drawing {
+            shape: shapes::training_shapes()[0].clone(),
+        };
+        assert!(swap_distractor(&drawing, &test, &mut rng).is_none());
     }
 
     #[test]

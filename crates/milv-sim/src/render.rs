@@ -139,7 +139,7 @@ pub struct Randomization {
     pub seed: u64,
     /// Brightness and colour cast of the whole scene.
     pub lighting: bool,
-    /// Table texture colours and spacing.
+    /// Table texture colours and spacing, the human's skin tone and sleeve colour.
     pub texture: bool,
     /// Camera corners moved by up to ±4 % of the image size.
     pub camera_jitter: bool,
@@ -183,6 +183,8 @@ pub struct Renderer {
     /// Texture line offset (cm) and brightness factor.
     texture_shift: f32,
     light: [f32; 3],
+    skin: [u8; 3],
+    sleeve: [u8; 3],
     clutter: Vec<(Vec<Vec2>, [u8; 3])>,
 }
 
@@ -201,6 +203,22 @@ fn stroke(width: f32) -> Stroke {
         ..Stroke::default()
     }
 }
+
+/// Skin tones and sleeve colours of the human (the first of each is the default look).
+const SKIN_TONES: [[u8; 3]; 5] = [
+    [224, 172, 138],
+    [241, 194, 160],
+    [198, 134, 96],
+    [141, 85, 54],
+    [255, 219, 180],
+];
+const SLEEVES: [[u8; 3]; 5] = [
+    [52, 96, 168],
+    [160, 40, 48],
+    [40, 120, 70],
+    [90, 90, 90],
+    [200, 170, 40],
+];
 
 /// Length of the robot's two links (cm) and its base, beyond the far edge of the table.
 pub const ROBOT_LINK_CM: f32 = 42.0;
@@ -243,6 +261,7 @@ impl Renderer {
         }
         let mut lk = look(domain);
         let mut texture_shift = 0.0;
+        let (mut skin, mut sleeve) = (SKIN_TONES[0], SLEEVES[0]);
         if rnd.texture {
             let tint = |c: [u8; 3], rng: &mut rand::rngs::StdRng| {
                 c.map(|v| (f32::from(v) * rng.random_range(0.85..1.15)).clamp(0.0, 255.0) as u8)
@@ -250,6 +269,8 @@ impl Renderer {
             lk.table = tint(lk.table, &mut rng);
             lk.texture = tint(lk.texture, &mut rng);
             texture_shift = rng.random_range(-4.0..4.0);
+            skin = SKIN_TONES[rng.random_range(0..SKIN_TONES.len())];
+            sleeve = SLEEVES[rng.random_range(0..SLEEVES.len())];
         }
         let light = if rnd.lighting {
             let b = rng.random_range(0.75..1.2);
@@ -290,6 +311,8 @@ impl Renderer {
             look: lk,
             texture_shift,
             light,
+            skin,
+            sleeve,
             clutter,
         })
     }
@@ -407,10 +430,11 @@ impl Renderer {
         let back = (HUMAN_SHOULDER - ee).normalized();
         let elbow = ee + back * 30.0;
         let sleeve_start = ee + back * 14.0;
-        let skin = [224, 172, 138];
+        let skin = self.skin;
+        let finger = skin.map(|c| c.saturating_sub(12));
         // Forearm, then the sleeve over its upper half, then the hand and fingers.
         self.stroke_line(&[ee, elbow], skin, 5.0);
-        self.stroke_line(&[sleeve_start, elbow + back * 10.0], [52, 96, 168], 7.0);
+        self.stroke_line(&[sleeve_start, elbow + back * 10.0], self.sleeve, 7.0);
         let fwd = -back;
         let side = fwd.perp();
         let palm: Vec<Vec2> = [
@@ -428,14 +452,10 @@ impl Renderer {
         for (i, len) in [3.0f32, 3.8, 3.6, 3.0].iter().enumerate() {
             let s = -2.4 + 1.6 * i as f32;
             let base = ee + fwd * 2.8 + side * s;
-            self.stroke_line(&[base, base + fwd * *len], [214, 160, 126], 1.1);
+            self.stroke_line(&[base, base + fwd * *len], finger, 1.1);
         }
         let thumb = ee + side * 3.0;
-        self.stroke_line(
-            &[thumb, thumb + (fwd + side).normalized() * 3.0],
-            [214, 160, 126],
-            1.3,
-        );
+        self.stroke_line(&[thumb, thumb + (fwd + side).normalized() * 3.0], finger, 1.3);
     }
 
     fn draw_robot(&mut self, ee: Vec2) {
