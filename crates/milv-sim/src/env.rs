@@ -291,15 +291,22 @@ pub struct Rollout {
 }
 
 /// Runs a policy for a full episode, recording `EPISODE_STEPS + 1` frames.
-pub fn rollout(mut sim: Sim, mut policy: impl FnMut(&Sim) -> Vec2) -> Rollout {
+pub fn rollout(sim: Sim, policy: impl FnMut(&Sim) -> Vec2) -> Rollout {
+    let steps = EPISODE_STEPS.saturating_sub(sim.steps());
+    rollout_steps(sim, steps, policy)
+}
+
+/// Runs a policy for `steps` steps, recording `steps + 1` frames (the last frame gets a
+/// zero action).
+fn rollout_steps(mut sim: Sim, steps: usize, mut policy: impl FnMut(&Sim) -> Vec2) -> Rollout {
     let mut out = Rollout {
-        frames: Vec::with_capacity(EPISODE_STEPS + 1),
-        actions: Vec::with_capacity(EPISODE_STEPS + 1),
-        states: Vec::with_capacity(EPISODE_STEPS + 1),
+        frames: Vec::with_capacity(steps + 1),
+        actions: Vec::with_capacity(steps + 1),
+        states: Vec::with_capacity(steps + 1),
         success: false,
         score: 0,
     };
-    while !sim.done() {
+    for _ in 0..steps {
         out.frames.push(sim.observe());
         out.states.push(sim.state());
         let a = policy(&sim);
@@ -400,26 +407,16 @@ pub fn warp_correspondence(a: &[f32], b: &[f32]) -> Vec<usize> {
 
 /// Replays end-effector positions (`positions[0]` must be the start): one step per
 /// position after the first, so the rollout has `positions.len()` frames.
-pub fn replay(mut sim: Sim, positions: &[Vec2]) -> Rollout {
-    let mut out = Rollout {
-        frames: Vec::with_capacity(positions.len()),
-        actions: Vec::with_capacity(positions.len()),
-        states: Vec::with_capacity(positions.len()),
-        success: false,
-        score: 0,
-    };
-    for next in positions.iter().skip(1) {
-        out.frames.push(sim.observe());
-        out.states.push(sim.state());
-        let applied = sim.step(*next - sim.end_effector());
-        out.actions.push([applied.x, applied.y]);
-    }
-    out.frames.push(sim.observe());
-    out.states.push(sim.state());
-    out.actions.push([0.0, 0.0]);
-    out.success = sim.success();
-    out.score = sim.score();
-    out
+pub fn replay(sim: Sim, positions: &[Vec2]) -> Rollout {
+    let steps = positions.len().saturating_sub(1);
+    let start = sim.steps();
+    rollout_steps(sim, steps, |s| {
+        positions
+            .get(s.steps() - start + 1)
+            .copied()
+            .unwrap_or(s.end_effector())
+            - s.end_effector()
+    })
 }
 
 /// The same motion in both domains at different speeds and lengths: the expert's
