@@ -21,6 +21,16 @@ struct Args {
 
 #[derive(Subcommand, Debug)]
 enum Cmd {
+    /// Times one frame's β (Brenner of A + gray SSIM of A and B) on one thread, in process;
+    /// used by tools/bench/score.py.
+    Bench {
+        a: PathBuf,
+        b: PathBuf,
+        #[arg(long, default_value_t = 200)]
+        iters: usize,
+        #[arg(long)]
+        json: bool,
+    },
     /// Scores one clip without any dataset: a folder of numbered PNG/JPEG frames or a video
     /// file. Prints one line per frame: frame, brenner_raw, brenner, brenner_h, ssim (gray,
     /// with the next frame; the last frame reuses the last pair), ssim_rgb, beta; with
@@ -87,8 +97,38 @@ fn score_clip(path: &std::path::Path, json: bool) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn load(p: &std::path::Path) -> anyhow::Result<image::RgbImage> {
+    Ok(image::open(p)
+        .with_context(|| format!("reading {}", p.display()))?
+        .into_rgb8())
+}
+
 fn run(args: Args) -> anyhow::Result<u8> {
     match args.cmd {
+        Cmd::Bench { a, b, iters, json } => {
+            let (ia, ib) = (load(&a)?, load(&b)?);
+            let (w, h) = (ia.width() as usize, ia.height() as usize);
+            let ra = Rgb::new(ia.as_raw(), w, h)?;
+            let rb = Rgb::new(ib.as_raw(), ib.width() as usize, ib.height() as usize)?;
+            let beta = |ra, rb| -> anyhow::Result<(f64, f64, f64)> {
+                let br = milv::quality::brenner(ra)?.normalized;
+                let s = ssim(ra, rb, SsimMode::Gray)?;
+                Ok((br, s, br * milv::quality::ssim01(s)))
+            };
+            let first = beta(ra, rb)?;
+            let t0 = std::time::Instant::now();
+            for _ in 0..iters.max(1) {
+                std::hint::black_box(beta(std::hint::black_box(ra), rb)?);
+            }
+            let per_frame = t0.elapsed().as_secs_f64() / iters.max(1) as f64;
+            let v = serde_json::json!({"width": w, "height": h, "iters": iters, "seconds_per_frame": per_frame,
+                "brenner": first.0, "ssim": first.1, "beta": first.2});
+            if json {
+                println!("{v}")
+            } else {
+                println!("{w}x{h}: {:.1} µs per frame, beta {}", per_frame * 1e6, first.2)
+            }
+        }
         Cmd::Frames { paths, json } => {
             if !json {
                 writeln!(
