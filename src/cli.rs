@@ -43,6 +43,24 @@ pub fn human_bytes(n: u64) -> String {
     }
 }
 
+/// Turns a tool's result into its exit code, printing a fatal error as `TOOL: error: …`.
+/// A closed stdout (`milv-… | head`) is not an error.
+pub fn finish(tool: &str, result: anyhow::Result<u8>) -> std::process::ExitCode {
+    match result {
+        Ok(code) => std::process::ExitCode::from(code),
+        Err(e)
+            if e.downcast_ref::<std::io::Error>()
+                .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe) =>
+        {
+            std::process::ExitCode::from(EXIT_OK)
+        }
+        Err(e) => {
+            eprintln!("{tool}: error: {e:#}");
+            std::process::ExitCode::from(EXIT_FATAL)
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

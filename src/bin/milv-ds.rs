@@ -296,11 +296,5 @@ fn run(args: Args) -> anyhow::Result<u8> {
 }
 
 fn main() -> ExitCode {
-    match run(Args::parse()) {
-        Ok(code) => ExitCode::from(code),
-        Err(e) => {
-            eprintln!("milv-ds: error: {e:#}");
-            ExitCode::from(cli::EXIT_FATAL)
-        }
-    }
+    cli::finish("milv-ds", run(Args::parse()))
 }

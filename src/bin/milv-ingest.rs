@@ -206,12 +206,5 @@ fn run(args: Args) -> anyhow::Result<u8> {
 }
 
 fn main() -> ExitCode {
-    let args = Args::parse();
-    match run(args) {
-        Ok(code) => ExitCode::from(code),
-        Err(e) => {
-            eprintln!("milv-ingest: error: {e:#}");
-            ExitCode::from(cli::EXIT_FATAL)
-        }
-    }
+    cli::finish("milv-ingest", run(Args::parse()))
 }

@@ -160,18 +160,5 @@ fn run(args: Args) -> anyhow::Result<u8> {
 }
 
 fn main() -> ExitCode {
-    match run(Args::parse()) {
-        Ok(code) => ExitCode::from(code),
-        // `milv-score frames … | head` closes the pipe early: not an error.
-        Err(e)
-            if e.downcast_ref::<std::io::Error>()
-                .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe) =>
-        {
-            ExitCode::from(cli::EXIT_OK)
-        }
-        Err(e) => {
-            eprintln!("milv-score: error: {e:#}");
-            ExitCode::from(cli::EXIT_FATAL)
-        }
-    }
+    cli::finish("milv-score", run(Args::parse()))
 }
