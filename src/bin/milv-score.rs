@@ -110,23 +110,23 @@ fn run(args: Args) -> anyhow::Result<u8> {
             let (w, h) = (ia.width() as usize, ia.height() as usize);
             let ra = Rgb::new(ia.as_raw(), w, h)?;
             let rb = Rgb::new(ib.as_raw(), ib.width() as usize, ib.height() as usize)?;
-            let beta = |ra, rb| -> anyhow::Result<(f64, f64, f64)> {
-                let br = milv::quality::brenner(ra)?.normalized;
-                let s = ssim(ra, rb, SsimMode::Gray)?;
-                Ok((br, s, br * milv::quality::ssim01(s)))
-            };
-            let first = beta(ra, rb)?;
+            let mut scorer = milv::quality::Scorer::default();
+            let first = scorer.beta_pair(ra, rb)?;
             let t0 = std::time::Instant::now();
             for _ in 0..iters.max(1) {
-                std::hint::black_box(beta(std::hint::black_box(ra), rb)?);
+                std::hint::black_box(scorer.beta_pair(std::hint::black_box(ra), rb)?);
             }
             let per_frame = t0.elapsed().as_secs_f64() / iters.max(1) as f64;
             let v = serde_json::json!({"width": w, "height": h, "iters": iters, "seconds_per_frame": per_frame,
-                "brenner": first.0, "ssim": first.1, "beta": first.2});
+                "brenner": first.brenner.normalized, "ssim": first.ssim, "beta": first.beta});
             if json {
                 println!("{v}")
             } else {
-                println!("{w}x{h}: {:.1} µs per frame, beta {}", per_frame * 1e6, first.2)
+                println!(
+                    "{w}x{h}: {:.1} µs per frame, beta {}",
+                    per_frame * 1e6,
+                    first.beta
+                )
             }
         }
         Cmd::Frames { paths, json } => {
