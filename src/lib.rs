@@ -8,14 +8,18 @@
 //! | [`data`] (`milv-data`) | versioned dataset store: schemas, Delta tables, Parquet shards, maintenance |
 //! | [`video`] (`milv-video`) | FFmpeg decode/encode to RGB frames with timestamps, frame folders, resizing |
 //! | [`ingest`] (`milv-ingest`) | videos + sidecars into the `episodes` and `frames` tables |
+//! | [`plot`] (`milv-plot`) | PNG charts (histogram, lines, heatmap) with plotters |
 //! | [`quality`] (`milv-quality`) | Brenner, SSIM and β_qua kernels (exact, pure) |
+//! | [`score`] (`milv-score`) | β_qua over a dataset: the `scores` table, curation, reports |
 //! | [`sim`] (`milv-sim`) | the two-embodiment tabletop: tasks, experts, renderer, evaluation |
 //!
 //! [`cli`] holds what the binaries share (progress bars, exit codes).
 
 pub use milv_data as data;
 pub use milv_ingest as ingest;
+pub use milv_plot as plot;
 pub use milv_quality as quality;
+pub use milv_score as score;
 pub use milv_sim as sim;
 pub use milv_video as video;
 

@@ -54,3 +54,98 @@ fn frames_scores_match_the_golden_values_and_bad_clips_fail_clearly() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("at least 2") && err.contains("one"), "{err}");
 }
+
+fn score_json(args: &[&str]) -> (i32, serde_json::Value, String) {
+    let mut a = args.to_vec();
+    a.push("--json");
+    let out = run(score_bin(), &a);
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    let v = if out.stdout.is_empty() {
+        serde_json::Value::Null
+    } else {
+        stdout_json(&out)
+    };
+    (out.status.code().unwrap_or(-1), v, err)
+}
+
+#[test]
+fn run_curate_report_on_an_ingested_dataset() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("src");
+    std::fs::create_dir(&src).unwrap();
+    let clips = [
+        clip_with_sidecar(&src, "h1.mp4", 8, "human", 1),
+        clip_with_sidecar(&src, "r1.mp4", 9, "robot", 2),
+        clip_with_sidecar(&src, "one.mp4", 1, "robot", 3),
+    ];
+    let ds = dir.path().join("ds");
+    let mut args = vec![path_str(&ds)];
+    args.extend(clips.iter().map(|c| path_str(c)));
+    let (code, _) = ingest(&args);
+    assert_eq!(code, 0);
+    let ds_s = path_str(&ds);
+
+    // The one-frame episode fails the run: clear message, no new version.
+    let (code, _, err) = score_json(&["run", ds_s]);
+    assert_eq!(code, 1, "{err}");
+    assert!(err.contains("1 frame(s): a clip needs at least 2"), "{err}");
+    assert_eq!(ds_json(&["info", ds_s])["latest_version"], 1);
+
+    // --skip-bad commits the rest and exits 3.
+    let (code, rep, err) = score_json(&["run", ds_s, "--skip-bad", "--jobs", "2"]);
+    assert_eq!(code, 3, "{err}");
+    assert_eq!(rep["frames_scored"], 17);
+    assert_eq!(rep["failed"].as_array().unwrap().len(), 1);
+    let run_id = rep["run_id"].as_str().unwrap().to_string();
+
+    // Only the human domain is a different run.
+    let (code, rep, _) = score_json(&["run", ds_s, "--domain", "human"]);
+    assert_eq!(code, 0);
+    assert_eq!(rep["frames_scored"], 8);
+
+    let (code, cur, err) = score_json(&[
+        "curate",
+        ds_s,
+        "--top-fraction",
+        "0.5",
+        "--min-episode-fraction",
+        "0",
+        "--run",
+        &run_id,
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(cur["frames_kept"], 9);
+    let (code, _, err) = score_json(&["curate", &format!("{ds_s}@2"), "--min-weight", "0.1"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("drop the @N"), "{err}");
+
+    let plots = dir.path().join("plots");
+    let (code, rep, err) = score_json(&[
+        "report",
+        ds_s,
+        "--run",
+        &run_id,
+        "--worst",
+        "2",
+        "--out",
+        path_str(&plots),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert_eq!(rep["frames"], 17);
+    assert_eq!(rep["episodes_total"], 2);
+    assert_eq!(rep["worst_frames"].as_array().unwrap().len(), 2);
+    for p in rep["plots"].as_array().unwrap() {
+        let img = image::open(p.as_str().unwrap()).unwrap();
+        assert!(img.width() > 100 && img.height() > 100);
+    }
+    assert_eq!(rep["plots"].as_array().unwrap().len(), 2);
+
+    // Tables that pyarrow/polars would read: the scores and curated tables are listed.
+    let info = ds_json(&["info", ds_s]);
+    assert_eq!(info["tables"]["scores"]["rows"], 25);
+    assert_eq!(info["tables"]["curated"]["rows"], 9);
+    assert_eq!(
+        ds_json(&["verify", ds_s])["problems"].as_array().unwrap().len(),
+        0
+    );
+}

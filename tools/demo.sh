@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The whole pipeline on the bundled samples: ingest human and robot clips with their
-# action sidecars, then inspect and verify the dataset. Prints where everything is.
+# action sidecars, score every frame's quality and curate by it, then inspect and verify
+# the dataset. Prints where everything is.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 tools/setup.sh
@@ -17,6 +18,12 @@ echo "== milv-ingest: simulated tabletop episodes (samples/sim, made by milv-sim
 "$BIN/milv-ingest" "$DS" --manifest samples/sim/drawing/manifest.jsonl --manifest samples/sim/pushing/manifest.jsonl --require-actions
 echo "== milv-ingest again: a no-op (episode ids are content hashes)"
 "$BIN/milv-ingest" "$DS" --manifest samples/manifest.jsonl
+echo "== milv-score run: beta_qua = Brenner x SSIM of every frame -> the scores table"
+"$BIN/milv-score" run "$DS"
+echo "== milv-score curate: the best 80 % of frames by weight -> the curated view"
+"$BIN/milv-score" curate "$DS" --top-fraction 0.8
+echo "== milv-score report"
+"$BIN/milv-score" report "$DS" --worst 5 --out "$OUT/quality"
 echo "== milv-ds info"
 "$BIN/milv-ds" info "$DS"
 echo "== milv-ds log"
@@ -36,7 +43,8 @@ PY
 cat <<TXT
 
 Outputs:
-  dataset           $DS   (Delta tables: $DS/episodes, $DS/frames; version log: $DS/_milv/versions)
+  dataset           $DS   (Delta tables: episodes, frames, scores, curated; version log: $DS/_milv/versions)
+  quality plots     $OUT/quality/beta_hist.png, $OUT/quality/beta_curves.png
   read it elsewhere .venv/bin/python -c "import polars as pl; print(pl.read_delta('$DS/frames').head())"
   inspect           target/debug/milv-ds info|log|verify $DS[@VERSION]
   the two domains   samples/contact_sheet.png (rows: human / robot, same motion)

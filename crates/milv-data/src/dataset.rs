@@ -307,6 +307,22 @@ impl Dataset {
     }
 }
 
+/// Streams the rows of one data file (e.g. a [`TableFile`]'s `abs_path`).
+pub fn read_file(
+    path: &Path,
+    columns: Option<&[&str]>,
+) -> Result<impl Iterator<Item = Result<RecordBatch>> + use<>> {
+    let cols: Option<Vec<String>> = columns.map(|c| c.iter().map(|s| s.to_string()).collect());
+    let reader = open_parquet(path, cols.as_deref())?;
+    let path = path.to_path_buf();
+    Ok(reader.map(move |b| {
+        b.map_err(|e| Error::Parquet {
+            source: e.into(),
+            path: path.clone(),
+        })
+    }))
+}
+
 pub(crate) fn open_parquet(path: &Path, columns: Option<&[String]>) -> Result<ParquetRecordBatchReader> {
     let file = File::open(path).map_err(|e| match e.kind() {
         std::io::ErrorKind::NotFound => Error::Invalid(format!(

@@ -14,6 +14,7 @@
 //! | [`shard`] | [`ShardWriter`]: zstd Parquet files of bounded size, episode-aligned row groups |
 //! | [`log`] | the version log: [`VersionEntry`], [`CommitMeta`] (command line, tool version, input digests) |
 //! | [`ops`] | maintenance: info, verify, delete episodes, compact, vacuum |
+//! | [`partition`] | [`Partition`]: `--partition i/n` shares for stateless parallel workers |
 //!
 //! ## How a change becomes a version
 //! 1. A [`Transaction`] is planned against the latest version; its new Parquet files are
@@ -43,6 +44,7 @@ pub mod error;
 pub mod frame_codec;
 pub mod log;
 pub mod ops;
+pub mod partition;
 pub mod rows;
 pub mod schema;
 pub mod shard;
@@ -50,6 +52,7 @@ pub mod shard;
 pub use dataset::{Dataset, DatasetRef, TableFile, Transaction};
 pub use error::{Error, Result};
 pub use log::{CommitMeta, FileAdd, InputDigest, TableChange, VersionEntry};
+pub use partition::Partition;
 pub use rows::{Episode, FrameRows, episodes_from_batches, episodes_to_batch};
 pub use schema::{ColType, Column, SCHEMA_VERSION, TableKind};
 pub use shard::{ClosedShard, ShardOptions, ShardWriter};

@@ -17,16 +17,28 @@ pub const SCHEMA_VERSION: u32 = 1;
 pub enum TableKind {
     Episodes,
     Frames,
+    Imagined,
+    Scores,
+    Curated,
 }
 
 impl TableKind {
-    pub const ALL: [TableKind; 2] = [TableKind::Episodes, TableKind::Frames];
+    pub const ALL: [TableKind; 5] = [
+        TableKind::Episodes,
+        TableKind::Frames,
+        TableKind::Imagined,
+        TableKind::Scores,
+        TableKind::Curated,
+    ];
 
     /// Folder name of the table under the dataset root.
     pub fn name(self) -> &'static str {
         match self {
             TableKind::Episodes => "episodes",
             TableKind::Frames => "frames",
+            TableKind::Imagined => "imagined",
+            TableKind::Scores => "scores",
+            TableKind::Curated => "curated",
         }
     }
 
@@ -38,6 +50,9 @@ impl TableKind {
         match self {
             TableKind::Episodes => EPISODES,
             TableKind::Frames => FRAMES,
+            TableKind::Imagined => IMAGINED,
+            TableKind::Scores => SCORES,
+            TableKind::Curated => CURATED,
         }
     }
 
@@ -45,6 +60,17 @@ impl TableKind {
         match self {
             TableKind::Episodes => "One row per episode (one clip of one embodiment).",
             TableKind::Frames => "One row per frame: encoded image plus the per-frame action/state vectors.",
+            TableKind::Imagined => {
+                "One row per translated human frame: the imagined robot frame G(x), its latent \
+                 from F's encoder and the inverse-dynamics action, per translation model."
+            }
+            TableKind::Scores => {
+                "One row per scored frame: Brenner x SSIM quality (beta_qua) of a scoring run; \
+                 the run's Brenner normalisation is in each file's `milv.scores` metadata."
+            }
+            TableKind::Curated => {
+                "The curated view the trainer reads: one row per frame it uses, with its loss weight."
+            }
         }
     }
 
@@ -87,6 +113,7 @@ pub enum ColType {
     /// `list<float32>`; Delta has no fixed-size lists, so the width is an episode attribute.
     ListF32,
     ListUtf8,
+    ListI32,
     TimestampUsUtc,
 }
 
@@ -100,6 +127,7 @@ impl ColType {
             ColType::Binary => "binary",
             ColType::ListF32 => "list<float32>",
             ColType::ListUtf8 => "list<string>",
+            ColType::ListI32 => "list<int32>",
             ColType::TimestampUsUtc => "timestamp[us, UTC]",
         }
     }
@@ -114,6 +142,7 @@ impl ColType {
             ColType::Binary => DataType::Binary,
             ColType::ListF32 => list_of(DataType::Float32),
             ColType::ListUtf8 => list_of(DataType::Utf8),
+            ColType::ListI32 => list_of(DataType::Int32),
             ColType::TimestampUsUtc => DataType::Timestamp(TimeUnit::Microsecond, Some("UTC".into())),
         }
     }
@@ -260,6 +289,122 @@ const FRAMES: &[Column] = &[
         ListF32,
         true,
         "State at this frame (episode's state_dim wide).",
+    ),
+];
+
+const IMAGINED: &[Column] = &[
+    col(
+        "episode_id",
+        Utf8,
+        false,
+        "The human episode that was translated.",
+    ),
+    col("frame_index", Int32, false, "0-based index within the episode."),
+    col(
+        "timestamp_ns",
+        Int64,
+        false,
+        "Timestamp of the source frame relative to the first frame.",
+    ),
+    col(
+        "model_id",
+        Utf8,
+        false,
+        "Translation model (digest of the A-CycleGAN checkpoint).",
+    ),
+    col("image", Binary, false, "The imagined robot frame G(x), PNG."),
+    col(
+        "latent",
+        Binary,
+        true,
+        "Latent of the imagined frame, raw little-endian values (see latent_dtype/shape).",
+    ),
+    col("latent_dtype", Utf8, true, "f16 | f32."),
+    col(
+        "latent_shape",
+        ListI32,
+        true,
+        "Shape of the latent, e.g. [64, 32, 32].",
+    ),
+    col(
+        "action",
+        ListF32,
+        true,
+        "Action predicted by the inverse-dynamics model for this frame.",
+    ),
+];
+
+const SCORES: &[Column] = &[
+    col("episode_id", Utf8, false, "Episode of the scored frame."),
+    col("frame_index", Int32, false, "0-based index within the episode."),
+    col(
+        "source_table",
+        Utf8,
+        false,
+        "Table the frame was read from: frames | imagined.",
+    ),
+    col(
+        "model_id",
+        Utf8,
+        true,
+        "Translation model of an imagined frame (null for recorded frames).",
+    ),
+    col(
+        "run_id",
+        Utf8,
+        false,
+        "Scoring run: digest of dataset version, table, model and selection.",
+    ),
+    col(
+        "brenner_raw",
+        Float64,
+        false,
+        "Brenner gradient S_h + S_v on BT.601 luma (spec/quality.md).",
+    ),
+    col(
+        "brenner",
+        Float64,
+        false,
+        "Brenner normalised per image to [0, 1].",
+    ),
+    col(
+        "ssim",
+        Float64,
+        false,
+        "Gray SSIM in [-1, 1] with the next frame (the last frame reuses the last pair).",
+    ),
+    col(
+        "beta",
+        Float64,
+        false,
+        "brenner * (ssim + 1) / 2, the per-image beta_qua.",
+    ),
+    col(
+        "weight",
+        Float64,
+        true,
+        "Set-normalised loss weight (brenner - min)/(max - min) * (ssim + 1)/2 over the run; \
+         null when the run was split into partitions (curate computes it then).",
+    ),
+];
+
+const CURATED: &[Column] = &[
+    col("episode_id", Utf8, false, "Episode the trainer uses."),
+    col(
+        "frame_index",
+        Int32,
+        false,
+        "Frame of that episode the trainer uses.",
+    ),
+    col("weight", Float64, false, "Loss weight of the frame (eq. 11)."),
+    col("source_table", Utf8, false, "frames | imagined."),
+    col("model_id", Utf8, true, "Translation model of imagined frames."),
+    col("run_id", Utf8, false, "Scoring run the weights come from."),
+    col(
+        "curation_id",
+        Utf8,
+        false,
+        "Digest of the curation (run and thresholds).",
     ),
 ];
 

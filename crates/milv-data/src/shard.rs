@@ -15,6 +15,7 @@ use deltalake::arrow::datatypes::DataType;
 use deltalake::arrow::datatypes::SchemaRef;
 use deltalake::parquet::arrow::ArrowWriter;
 use deltalake::parquet::basic::{Compression, ZstdLevel};
+use deltalake::parquet::file::metadata::KeyValue;
 use deltalake::parquet::file::properties::{EnabledStatistics, WriterProperties};
 use deltalake::parquet::schema::types::ColumnPath;
 
@@ -37,6 +38,9 @@ pub struct ShardOptions {
     /// Per-column compression overrides: `None` stores the column uncompressed (already
     /// compressed payloads such as PNG frames gain nothing from zstd and cost CPU).
     pub column_zstd: Vec<(String, Option<i32>)>,
+    /// Key-value pairs written into every file's Parquet footer (e.g. a run's parameters,
+    /// readable with `pyarrow.parquet.read_metadata(f).metadata`).
+    pub file_metadata: Vec<(String, String)>,
 }
 
 impl Default for ShardOptions {
@@ -48,6 +52,7 @@ impl Default for ShardOptions {
             max_row_group_bytes: 32 << 20,
             zstd_level: 3,
             column_zstd: Vec::new(),
+            file_metadata: Vec::new(),
         }
     }
 }
@@ -182,6 +187,14 @@ impl ShardWriter {
                 None => Compression::UNCOMPRESSED,
             };
             props = props.set_column_compression(ColumnPath::from(name.as_str()), c);
+        }
+        if !opts.file_metadata.is_empty() {
+            let kv = opts
+                .file_metadata
+                .iter()
+                .map(|(k, v)| KeyValue::new(k.clone(), v.clone()))
+                .collect();
+            props = props.set_key_value_metadata(Some(kv));
         }
         let props = props.build();
         Ok(ShardWriter {

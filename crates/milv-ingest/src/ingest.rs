@@ -5,7 +5,6 @@ use std::cell::Cell;
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Read as _;
 use std::path::{Path, PathBuf};
-use std::str::FromStr;
 
 use milv_data::frame_codec::{self, FrameEncoding};
 use milv_data::{
@@ -28,26 +27,7 @@ pub const SPLITS: &[&str] = &["train", "val", "test"];
 pub const MIN_FPS: f64 = 0.001;
 pub const MAX_FPS: f64 = 10_000.0;
 
-/// `i/n`: this worker takes every input whose position `p` has `p % n == i`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Partition {
-    pub index: u32,
-    pub count: u32,
-}
-
-impl FromStr for Partition {
-    type Err = String;
-
-    fn from_str(s: &str) -> std::result::Result<Self, String> {
-        let (i, n) = s.split_once('/').ok_or_else(|| format!("{s:?} is not i/n"))?;
-        let index: u32 = i.trim().parse().map_err(|_| format!("{i:?} is not a number"))?;
-        let count: u32 = n.trim().parse().map_err(|_| format!("{n:?} is not a number"))?;
-        if count == 0 || index >= count {
-            return Err(format!("partition {index}/{count}: need 0 <= i < n"));
-        }
-        Ok(Partition { index, count })
-    }
-}
+pub use milv_data::Partition;
 
 /// How to ingest.
 #[derive(Clone, Debug)]
@@ -617,10 +597,7 @@ fn ingest_attempt(
     let selected: Vec<&InputSpec> = inputs
         .iter()
         .enumerate()
-        .filter(|(i, _)| {
-            opts.partition
-                .is_none_or(|p| *i as u64 % p.count as u64 == p.index as u64)
-        })
+        .filter(|(i, _)| opts.partition.is_none_or(|p| p.contains_index(*i as u64)))
         .map(|(_, s)| s)
         .collect();
     let plans: Vec<Result<Planned>> = selected.par_iter().map(|s| plan_one(s, opts)).collect();
@@ -876,17 +853,6 @@ fn write_episodes(txn: &milv_data::Transaction<'_>, episodes: &[Episode]) -> Res
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn partitions_parse() {
-        assert_eq!(
-            "1/4".parse::<Partition>().unwrap(),
-            Partition { index: 1, count: 4 }
-        );
-        assert!("4/4".parse::<Partition>().is_err());
-        assert!("1".parse::<Partition>().is_err());
-        assert!("0/0".parse::<Partition>().is_err());
-    }
 
     #[test]
     fn metadata_is_validated() {

@@ -12,7 +12,7 @@
 //! | [`ssim`] | SSIM, gray (on luma) or rgb (per channel, then mean); 11-tap Gaussian, valid region |
 //! | [`Scorer`], [`ClipScorer`] | the same with reusable buffers; a clip streams frame by frame |
 //! | [`beta_video`], [`beta_video_par`] | β per frame of a clip with the last-frame rule (serial, rayon) |
-//! | [`set_weights`] | the set-normalised loss weight |
+//! | [`set_weight`], [`set_weights`] | the set-normalised loss weight |
 //!
 //! Pure functions over `&[u8]` RGB24 plus dimensions: no I/O, no panics on bad sizes.
 //! The SSIM kernel (`kernel.rs`) fuses the five Gaussian moment maps into one pass over
@@ -334,9 +334,20 @@ pub fn beta_video_par(frames: &[Rgb<'_>], jobs: usize) -> Result<Vec<FrameScore>
     Ok(parts.into_iter().flatten().collect())
 }
 
-/// The set normalisation: `(b_min, b_max)` over normalised Brenner values, and each
-/// frame's `weight = (b − b_min)/(b_max − b_min) · ssim01`. With `b_max = b_min` every
-/// frame is equally sharp and the Brenner factor is 1.
+/// One frame's set-normalised weight, `(b − b_min)/(b_max − b_min) · ssim01(ssim)`, for
+/// normalised Brenner `b`; with `b_max = b_min` every frame is equally sharp and the
+/// Brenner factor is 1.
+pub fn set_weight(b: f64, ssim: f64, bmin: f64, bmax: f64) -> f64 {
+    let bw = if bmax > bmin {
+        (b - bmin) / (bmax - bmin)
+    } else {
+        1.0
+    };
+    bw * ssim01(ssim)
+}
+
+/// The set normalisation over `scores`: `(b_min, b_max)` of the normalised Brenner values
+/// and each frame's [`set_weight`].
 pub fn set_weights(scores: &[FrameScore]) -> (f64, f64, Vec<f64>) {
     let bmin = scores
         .iter()
@@ -348,14 +359,7 @@ pub fn set_weights(scores: &[FrameScore]) -> (f64, f64, Vec<f64>) {
         .fold(f64::NEG_INFINITY, f64::max);
     let weights = scores
         .iter()
-        .map(|s| {
-            let bw = if bmax > bmin {
-                (s.brenner.normalized - bmin) / (bmax - bmin)
-            } else {
-                1.0
-            };
-            bw * ssim01(s.ssim)
-        })
+        .map(|s| set_weight(s.brenner.normalized, s.ssim, bmin, bmax))
         .collect();
     (bmin, bmax, weights)
 }

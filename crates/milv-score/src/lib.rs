@@ -1,0 +1,70 @@
+//! # milv-score — β_qua over a dataset
+//!
+//! The paper weights every imagined robot frame by `β_qua = Brenner × SSIM(y_t, y_{t+1})`
+//! (section 4.2, eq. 10–11; exact definitions in `shared/spec/quality.md`, kernels in
+//! `milv-quality`). This crate applies it to a dataset version:
+//!
+//! | module | what |
+//! |---|---|
+//! | [`run`] | [`score_dataset`]: decode and score every selected episode of `frames` or `imagined` in parallel, commit a `scores` table version |
+//! | [`curate`] | [`curate`](curate::curate): the set-normalised weights of a scoring run, thresholded into the `curated` view the trainer reads |
+//! | [`report`] | [`summarize`]: per-episode mean/min β, worst frames, the values for plots |
+//!
+//! Every stage reads a pinned dataset version and appends one version; a run can be split
+//! across stateless workers with `--partition i/n` (they share one `run_id`, and curation
+//! normalises over all of the run's rows).
+
+pub mod curate;
+pub mod report;
+pub mod run;
+
+pub use curate::{CurateOptions, CurateReport, Rule, curate};
+pub use report::{EpisodeSummary, Summary, WorstFrame, summarize};
+pub use run::{RunOptions, RunReport, Source, score_dataset};
+
+/// Why an episode or a run could not be scored or curated.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error(transparent)]
+    Data(#[from] milv_data::Error),
+    #[error("arrow: {0}")]
+    Arrow(#[from] milv_data::arrow::error::ArrowError),
+    #[error("{0}")]
+    Invalid(String),
+    #[error("the selection is empty: {0}")]
+    EmptySelection(String),
+    /// Some episodes could not be scored; nothing was committed.
+    #[error("{} episode(s) could not be scored, nothing committed (use --skip-bad to commit the others):\n  {}", .0.len(), .0.iter().map(ToString::to_string).collect::<Vec<_>>().join("\n  "))]
+    Episodes(Vec<EpisodeError>),
+}
+
+pub type Result<T> = std::result::Result<T, Error>;
+
+/// One episode that failed, and why.
+#[derive(Clone, Debug, serde::Serialize, thiserror::Error)]
+#[error("episode {episode_id}: {message}")]
+pub struct EpisodeError {
+    pub episode_id: String,
+    pub message: String,
+}
+
+/// Hex sha256 of the parts, truncated to 16 characters: ids of runs and curations.
+pub(crate) fn digest(parts: &[&str]) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    for p in parts {
+        h.update(p.as_bytes());
+        h.update([0]);
+    }
+    h.finalize().iter().take(8).map(|b| format!("{b:02x}")).collect()
+}
+
+/// Typed column access with an error naming the column.
+pub(crate) fn column<'a, T: 'static>(
+    b: &'a milv_data::arrow::array::RecordBatch,
+    name: &str,
+) -> Result<&'a T> {
+    b.column_by_name(name)
+        .and_then(|c| c.as_any().downcast_ref::<T>())
+        .ok_or_else(|| Error::Invalid(format!("column {name} missing or of an unexpected type")))
+}
