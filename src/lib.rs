@@ -5,6 +5,7 @@
 //!
 //! | crate | role |
 //! |---|---|
+//! | [`align`] (`milv-align`) | banded DTW alignment of paired human/robot clips → the `alignments` table |
 //! | [`data`] (`milv-data`) | versioned dataset store: schemas, Delta tables, Parquet shards, maintenance |
 //! | [`video`] (`milv-video`) | FFmpeg decode/encode to RGB frames with timestamps, frame folders, resizing |
 //! | [`ingest`] (`milv-ingest`) | videos + sidecars into the `episodes` and `frames` tables |
@@ -15,6 +16,7 @@
 //!
 //! [`cli`] holds what the binaries share (progress bars, exit codes).
 
+pub use milv_align as align;
 pub use milv_data as data;
 pub use milv_ingest as ingest;
 pub use milv_plot as plot;

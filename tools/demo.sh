@@ -18,6 +18,10 @@ echo "== milv-ingest: simulated tabletop episodes (samples/sim, made by milv-sim
 "$BIN/milv-ingest" "$DS" --manifest samples/sim/drawing/manifest.jsonl --manifest samples/sim/pushing/manifest.jsonl --require-actions
 echo "== milv-ingest again: a no-op (episode ids are content hashes)"
 "$BIN/milv-ingest" "$DS" --manifest samples/manifest.jsonl
+echo "== milv-align: frame correspondences of the loosely paired human/robot clips (state features)"
+"$BIN/milv-align" "$DS" --features state --truth samples/sim/drawing/warps.jsonl
+PAIR=$(head -1 samples/sim/drawing/warps.jsonl | sed 's/.*"pair_id":"\([^"]*\)".*/\1/')
+"$BIN/milv-align" show "$DS" "$PAIR" --features state -o "$OUT/align_$PAIR.png"
 echo "== milv-score run: beta_qua = Brenner x SSIM of every frame -> the scores table"
 "$BIN/milv-score" run "$DS"
 echo "== milv-score curate: the best 80 % of frames by weight -> the curated view"
@@ -43,8 +47,9 @@ PY
 cat <<TXT
 
 Outputs:
-  dataset           $DS   (Delta tables: episodes, frames, scores, curated; version log: $DS/_milv/versions)
+  dataset           $DS   (Delta tables: episodes, frames, alignments, scores, curated; version log: $DS/_milv/versions)
   quality plots     $OUT/quality/beta_hist.png, $OUT/quality/beta_curves.png
+  an alignment      $OUT/align_$PAIR.png (cost matrix of one human/robot pair, with its path)
   read it elsewhere .venv/bin/python -c "import polars as pl; print(pl.read_delta('$DS/frames').head())"
   inspect           target/debug/milv-ds info|log|verify $DS[@VERSION]
   the two domains   samples/contact_sheet.png (rows: human / robot, same motion)

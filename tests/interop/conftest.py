@@ -1,7 +1,8 @@
 """Fixtures for the Python interop tests.
 
 Environment:
-  MILV_BIN      folder holding the built `milv-ingest`, `milv-ds` and `milv-score` binaries
+  MILV_BIN      folder holding the built `milv-ingest`, `milv-ds`, `milv-score` and
+                `milv-align` binaries
                 (default: target/debug, then target/release, if they exist there)
   MILV_SAMPLES  folder made by tools/make_samples.sh (default: samples/ when it has
                 a manifest.jsonl, otherwise the samples are generated into a temp dir)
@@ -23,7 +24,7 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-BINARIES = ("milv-ingest", "milv-ds", "milv-score")
+BINARIES = ("milv-ingest", "milv-ds", "milv-score", "milv-align")
 
 
 def _has_bins(d: Path) -> bool:

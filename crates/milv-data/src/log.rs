@@ -83,6 +83,19 @@ impl CommitMeta {
     }
 }
 
+/// A short, stable id (16 hex chars of sha256) naming a run by what it read and how:
+/// re-running the same stage on the same inputs gets the same id, so it can find its own
+/// earlier output, and partitioned workers of one run agree on it.
+pub fn run_id<S: AsRef<str>>(parts: &[S]) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    for p in parts {
+        h.update(p.as_ref().as_bytes());
+        h.update([0]);
+    }
+    h.finalize().iter().take(8).map(|b| format!("{b:02x}")).collect()
+}
+
 /// One dataset version.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
 pub struct VersionEntry {

@@ -20,15 +20,17 @@ pub enum TableKind {
     Imagined,
     Scores,
     Curated,
+    Alignments,
 }
 
 impl TableKind {
-    pub const ALL: [TableKind; 5] = [
+    pub const ALL: [TableKind; 6] = [
         TableKind::Episodes,
         TableKind::Frames,
         TableKind::Imagined,
         TableKind::Scores,
         TableKind::Curated,
+        TableKind::Alignments,
     ];
 
     /// Folder name of the table under the dataset root.
@@ -39,6 +41,7 @@ impl TableKind {
             TableKind::Imagined => "imagined",
             TableKind::Scores => "scores",
             TableKind::Curated => "curated",
+            TableKind::Alignments => "alignments",
         }
     }
 
@@ -53,6 +56,7 @@ impl TableKind {
             TableKind::Imagined => IMAGINED,
             TableKind::Scores => SCORES,
             TableKind::Curated => CURATED,
+            TableKind::Alignments => ALIGNMENTS,
         }
     }
 
@@ -70,6 +74,10 @@ impl TableKind {
             }
             TableKind::Curated => {
                 "The curated view the trainer reads: one row per frame it uses, with its loss weight."
+            }
+            TableKind::Alignments => {
+                "One row per aligned (human frame, robot frame) pair of a loosely paired clip pair \
+                 (banded DTW), for the A-CycleGAN auxiliary loss."
             }
         }
     }
@@ -405,6 +413,37 @@ const CURATED: &[Column] = &[
         Utf8,
         false,
         "Digest of the curation (run and thresholds).",
+    ),
+];
+
+const ALIGNMENTS: &[Column] = &[
+    col("pair_id", Utf8, false, "The pair (episodes sharing a pair_id)."),
+    col("human_episode_id", Utf8, false, "The human episode of the pair."),
+    col("human_frame", Int32, false, "Frame of the human episode."),
+    col("robot_episode_id", Utf8, false, "The robot episode of the pair."),
+    col(
+        "robot_frame",
+        Int32,
+        false,
+        "Frame of the robot episode aligned with it.",
+    ),
+    col(
+        "cost",
+        Float64,
+        false,
+        "Local cost of this cell: squared distance of the two frames' features.",
+    ),
+    col(
+        "features",
+        Utf8,
+        false,
+        "Feature kind aligned on: motion | state | translated.",
+    ),
+    col(
+        "run_id",
+        Utf8,
+        false,
+        "Alignment run: digest of what it read and its options.",
     ),
 ];
 

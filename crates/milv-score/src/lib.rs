@@ -48,16 +48,7 @@ pub struct EpisodeError {
     pub message: String,
 }
 
-/// Hex sha256 of the parts, truncated to 16 characters: ids of runs and curations.
-pub(crate) fn digest(parts: &[&str]) -> String {
-    use sha2::{Digest, Sha256};
-    let mut h = Sha256::new();
-    for p in parts {
-        h.update(p.as_bytes());
-        h.update([0]);
-    }
-    h.finalize().iter().take(8).map(|b| format!("{b:02x}")).collect()
-}
+pub(crate) use milv_data::run_id as digest;
 
 /// Typed column access with an error naming the column.
 pub(crate) fn column<'a, T: 'static>(

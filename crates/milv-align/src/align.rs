@@ -1,0 +1,519 @@
+//! Aligning every pair of a dataset version and committing the `alignments` table.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
+
+use milv_data::arrow::array::{
+    Array, ArrayRef, BinaryArray, Float32Array, Float64Array, Int32Array, ListArray, RecordBatch, StringArray,
+};
+use milv_data::frame_codec::FrameEncoding;
+use milv_data::{CommitMeta, Dataset, Episode, Partition, ShardOptions, TableKind, ops};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::dtw::{Alignment, Band, StepPattern, dtw, row_to_col};
+use crate::features::{Clip, ClipSource, FeatureKind};
+use crate::{Error, Result};
+
+#[derive(Clone, Debug)]
+pub struct AlignOptions {
+    /// Sakoe–Chiba half-width as a fraction of the longer clip.
+    pub band: f64,
+    pub step: StepPattern,
+    /// Translation model for `translated` features (default: the only one).
+    pub model_id: Option<String>,
+    /// Only these pairs.
+    pub pairs: Option<BTreeSet<String>>,
+    pub partition: Option<Partition>,
+    /// A pair is flagged untrusted above this normalised cost per feature dimension.
+    pub max_cost: f64,
+    /// Ground truth per pair (human frame → robot frame), e.g. milv-sim's warps.jsonl.
+    pub truth: BTreeMap<String, Vec<usize>>,
+}
+
+impl Default for AlignOptions {
+    fn default() -> Self {
+        AlignOptions {
+            band: 0.2,
+            step: StepPattern::Symmetric2,
+            model_id: None,
+            pairs: None,
+            partition: None,
+            max_cost: 0.5,
+            truth: BTreeMap::new(),
+        }
+    }
+}
+
+/// How one pair aligned.
+#[derive(Clone, Debug, Serialize)]
+pub struct PairSummary {
+    pub pair_id: String,
+    pub human_episode_id: String,
+    pub robot_episode_id: String,
+    pub human_frames: usize,
+    pub robot_frames: usize,
+    /// Accumulated cost over the step pattern's normaliser.
+    pub normalized_cost: f64,
+    /// `normalized_cost` per feature dimension (comparable across feature kinds).
+    pub cost_per_dim: f64,
+    pub path_length: usize,
+    /// Share of path cells on the band's edge (the band may have cut off the true path).
+    pub band_edge_fraction: f64,
+    /// False when the cost is high or the path hugs the band: do not train on it blindly.
+    pub trusted: bool,
+    /// Against ground truth, when given: mean and max |recovered − true| robot frame.
+    pub mean_frame_error: Option<f64>,
+    pub max_frame_error: Option<usize>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct PairError {
+    pub pair_id: String,
+    pub message: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct AlignReport {
+    pub read_version: u64,
+    pub version: u64,
+    pub run_id: String,
+    pub features: String,
+    pub pairs: Vec<PairSummary>,
+    pub failed: Vec<PairError>,
+    pub rows: u64,
+    /// Mean of the pairs' mean frame errors (with ground truth).
+    pub mean_frame_error: Option<f64>,
+    pub max_frame_error: Option<usize>,
+}
+
+/// The two episodes of each pair, or why the pair is unusable.
+fn pairs_of(episodes: &[Episode]) -> BTreeMap<String, std::result::Result<(Episode, Episode), String>> {
+    let mut by_pair: BTreeMap<String, Vec<&Episode>> = BTreeMap::new();
+    for e in episodes {
+        if let Some(p) = &e.pair_id {
+            by_pair.entry(p.clone()).or_default().push(e);
+        }
+    }
+    by_pair
+        .into_iter()
+        .map(|(p, eps)| {
+            let r = match eps.as_slice() {
+                [a, b] => {
+                    let (h, r) = if a.domain == "human" { (a, b) } else { (b, a) };
+                    if h.domain != "human" || r.domain != "robot" {
+                        Err(format!(
+                            "both episodes are {} (a pair needs one human and one robot)",
+                            a.domain
+                        ))
+                    } else {
+                        Ok(((*h).clone(), (*r).clone()))
+                    }
+                }
+                [one] => Err(format!(
+                    "only a {} episode ({}): its {} episode is missing",
+                    one.domain,
+                    one.episode_id,
+                    if one.domain == "human" { "robot" } else { "human" }
+                )),
+                many => Err(format!(
+                    "{} episodes share this pair id (a pair needs exactly 2)",
+                    many.len()
+                )),
+            };
+            (p, r)
+        })
+        .collect()
+}
+
+fn list_f32(l: &ListArray, i: usize) -> Option<Vec<f32>> {
+    if l.is_null(i) {
+        return None;
+    }
+    let v = l.value(i);
+    v.as_any()
+        .downcast_ref::<Float32Array>()
+        .map(|a| a.values().to_vec())
+}
+
+fn col<'a, T: 'static>(b: &'a RecordBatch, name: &str) -> Result<&'a T> {
+    b.column_by_name(name)
+        .and_then(|c| c.as_any().downcast_ref::<T>())
+        .ok_or_else(|| Error::Invalid(format!("column {name} missing or of an unexpected type")))
+}
+
+/// Reads the clips of `wanted` episodes from `table` (frames, or imagined of `model`).
+fn load_clips(
+    ds: &Dataset,
+    v: u64,
+    table: TableKind,
+    model: Option<&str>,
+    wanted: &BTreeMap<String, &Episode>,
+) -> Result<BTreeMap<String, Clip>> {
+    let mut cols = vec!["episode_id", "frame_index", "image"];
+    if table == TableKind::Frames {
+        cols.push("state");
+    } else {
+        cols.push("model_id");
+    }
+    // Per episode: (frame index, image, state) rows, and whether any row has a state.
+    type Rows = (Vec<(i32, Vec<u8>, Option<Vec<f32>>)>, bool);
+    let mut clips: BTreeMap<String, Rows> = BTreeMap::new();
+    for b in ds.scan(table, v, Some(&cols))? {
+        let b = b?;
+        let ids: &StringArray = col(&b, "episode_id")?;
+        let idx: &Int32Array = col(&b, "frame_index")?;
+        let img: &BinaryArray = col(&b, "image")?;
+        let states: Option<&ListArray> = if table == TableKind::Frames {
+            Some(col(&b, "state")?)
+        } else {
+            None
+        };
+        let models: Option<&StringArray> = if table == TableKind::Imagined {
+            Some(col(&b, "model_id")?)
+        } else {
+            None
+        };
+        for i in 0..b.num_rows() {
+            let id = ids.value(i);
+            if !wanted.contains_key(id) || models.is_some_and(|m| Some(m.value(i)) != model) {
+                continue;
+            }
+            let st = states.and_then(|s| list_f32(s, i));
+            let e = clips.entry(id.to_string()).or_default();
+            e.1 |= st.is_some();
+            e.0.push((idx.value(i), img.value(i).to_vec(), st));
+        }
+    }
+    let mut out = BTreeMap::new();
+    for (id, (mut rows, has_states)) in clips {
+        rows.sort_by_key(|r| r.0);
+        let ep = wanted[&id];
+        let imagined = table == TableKind::Imagined;
+        let states = if has_states {
+            rows.iter().map(|r| r.2.clone()).collect::<Option<Vec<_>>>()
+        } else {
+            None
+        };
+        out.insert(
+            id.clone(),
+            Clip {
+                episode_id: id,
+                domain: ep.domain.clone(),
+                encoding: FrameEncoding::from_name(&ep.frame_encoding).unwrap_or(FrameEncoding::Png),
+                // Imagined frames are PNGs of the model's size: decode without a size check.
+                width: if imagined { 0 } else { ep.width as u32 },
+                height: if imagined { 0 } else { ep.height as u32 },
+                images: rows.into_iter().map(|r| r.1).collect(),
+                states,
+            },
+        );
+    }
+    Ok(out)
+}
+
+/// The only translation model of the imagined table, or the one asked for.
+fn resolve_model(ds: &Dataset, v: u64, wanted: Option<&str>) -> Result<String> {
+    let mut models = BTreeSet::new();
+    for b in ds.scan(TableKind::Imagined, v, Some(&["model_id"]))? {
+        let b = b?;
+        let m: &StringArray = col(&b, "model_id")?;
+        models.extend((0..b.num_rows()).map(|i| m.value(i).to_string()));
+    }
+    match wanted {
+        Some(w) if models.contains(w) => Ok(w.to_string()),
+        _ if models.is_empty() => Err(Error::Invalid(format!(
+            "--features translated needs translated human frames, and version {v} has no imagined rows \
+             (run `milv-train translate` first)"
+        ))),
+        Some(w) => Err(Error::Invalid(format!(
+            "model {w} has no imagined rows at version {v}"
+        ))),
+        None if models.len() == 1 => Ok(models.into_iter().next().unwrap_or_default()),
+        None => Err(Error::Invalid(format!(
+            "the imagined table holds {} models; choose one with --model-id",
+            models.len()
+        ))),
+    }
+}
+
+/// Aligns one pair's clips.
+fn align_pair(
+    kind: &dyn FeatureKind,
+    human: &Clip,
+    robot: &Clip,
+    opts: &AlignOptions,
+) -> std::result::Result<(Alignment, usize, f64), String> {
+    for c in [human, robot] {
+        if c.images.len() < 2 {
+            return Err(format!(
+                "episode {} has {} frame(s); aligning needs at least 2",
+                c.episode_id,
+                c.images.len()
+            ));
+        }
+    }
+    let h = kind.extract(human).map_err(|e| e.to_string())?;
+    let r = kind.extract(robot).map_err(|e| e.to_string())?;
+    if h.d != r.d {
+        return Err(format!("feature widths differ: human {} and robot {}", h.d, r.d));
+    }
+    let r = kind.fit_pair(&h, r);
+    let (n, m) = (h.n, r.n);
+    let w = (opts.band * n.max(m) as f64).ceil() as usize;
+    let band = Band::around_diagonal(n, m, w);
+    let al = dtw(&h, &r, &band, opts.step, true).map_err(|e| e.to_string())?;
+    let edge = al
+        .path
+        .iter()
+        .filter(|&&(i, j)| {
+            let c = if n > 1 {
+                (i as f64 * (m - 1) as f64 / (n - 1) as f64).round() as usize
+            } else {
+                0
+            };
+            (j + w == c || j == c + w) && j != 0 && j != m - 1
+        })
+        .count() as f64
+        / al.path.len() as f64;
+    Ok((al, h.d, edge))
+}
+
+/// Loads and aligns one pair (for `milv-align show`): the clips' features and alignment.
+pub fn load_pair(
+    ds: &Dataset,
+    version: Option<u64>,
+    pair_id: &str,
+    kind: &dyn FeatureKind,
+    opts: &AlignOptions,
+) -> Result<(crate::Features, crate::Features, Alignment)> {
+    let v = ds.resolve(version)?;
+    let eps = ops::episodes(ds, v)?;
+    let pairs = pairs_of(&eps);
+    let (h, r) = pairs
+        .get(pair_id)
+        .ok_or_else(|| Error::Invalid(format!("no pair {pair_id} at version {v}")))?
+        .clone()
+        .map_err(|m| Error::Invalid(format!("pair {pair_id}: {m}")))?;
+    let model = match kind.human_source() {
+        ClipSource::Imagined => Some(resolve_model(ds, v, opts.model_id.as_deref())?),
+        ClipSource::Frames => None,
+    };
+    let (hc, rc) = clips_for(ds, v, kind, model.as_deref(), &[(&h, &r)])?;
+    let (hc, rc) = (
+        hc.get(&h.episode_id)
+            .ok_or_else(|| Error::Invalid(format!("episode {} has no frames", h.episode_id)))?,
+        rc.get(&r.episode_id)
+            .ok_or_else(|| Error::Invalid(format!("episode {} has no frames", r.episode_id)))?,
+    );
+    let (al, _, _) =
+        align_pair(kind, hc, rc, opts).map_err(|m| Error::Invalid(format!("pair {pair_id}: {m}")))?;
+    let hf = kind.extract(hc)?;
+    let rf = kind.fit_pair(&hf, kind.extract(rc)?);
+    Ok((hf, rf, al))
+}
+
+type ClipMaps = (BTreeMap<String, Clip>, BTreeMap<String, Clip>);
+
+fn clips_for(
+    ds: &Dataset,
+    v: u64,
+    kind: &dyn FeatureKind,
+    model: Option<&str>,
+    pairs: &[(&Episode, &Episode)],
+) -> Result<ClipMaps> {
+    let humans: BTreeMap<String, &Episode> = pairs.iter().map(|(h, _)| (h.episode_id.clone(), *h)).collect();
+    let robots: BTreeMap<String, &Episode> = pairs.iter().map(|(_, r)| (r.episode_id.clone(), *r)).collect();
+    let h = match kind.human_source() {
+        ClipSource::Frames => load_clips(ds, v, TableKind::Frames, None, &humans)?,
+        ClipSource::Imagined => load_clips(ds, v, TableKind::Imagined, model, &humans)?,
+    };
+    let r = load_clips(ds, v, TableKind::Frames, None, &robots)?;
+    Ok((h, r))
+}
+
+/// Aligns every selected pair of `version` (default latest) and commits the alignments
+/// of the pairs that aligned; the others are listed in the report with their reason.
+pub fn align_dataset(
+    ds: &Dataset,
+    version: Option<u64>,
+    kind: &dyn FeatureKind,
+    opts: &AlignOptions,
+    mut meta: CommitMeta,
+    progress: &(dyn Fn() + Sync),
+) -> Result<AlignReport> {
+    if !(opts.band > 0.0 && opts.band <= 1.0) {
+        return Err(Error::Invalid(format!("--band {} must be in (0, 1]", opts.band)));
+    }
+    let v = ds.resolve(version)?;
+    let eps = ops::episodes(ds, v)?;
+    let mut pairs = pairs_of(&eps);
+    if let Some(want) = &opts.pairs {
+        if let Some(missing) = want.iter().find(|p| !pairs.contains_key(*p)) {
+            return Err(Error::Invalid(format!("no pair {missing} at version {v}")));
+        }
+        pairs.retain(|p, _| want.contains(p));
+    }
+    pairs.retain(|p, _| opts.partition.is_none_or(|part| part.contains_key(p)));
+    if pairs.is_empty() {
+        return Err(Error::Invalid(format!(
+            "no paired episodes (pair_id) to align at version {v}"
+        )));
+    }
+    let model = match kind.human_source() {
+        ClipSource::Imagined => Some(resolve_model(ds, v, opts.model_id.as_deref())?),
+        ClipSource::Frames => None,
+    };
+    let mut failed: Vec<PairError> = Vec::new();
+    let mut good: Vec<(&String, &Episode, &Episode)> = Vec::new();
+    for (p, r) in &pairs {
+        match r {
+            Ok((h, rb)) => good.push((p, h, rb)),
+            Err(m) => failed.push(PairError {
+                pair_id: p.clone(),
+                message: m.clone(),
+            }),
+        }
+    }
+    let refs: Vec<(&Episode, &Episode)> = good.iter().map(|(_, h, r)| (*h, *r)).collect();
+    let (hclips, rclips) = clips_for(ds, v, kind, model.as_deref(), &refs)?;
+    type PairResult = std::result::Result<(PairSummary, Alignment), String>;
+    let results: Vec<(String, PairResult)> = good
+        .par_iter()
+        .map(|(p, h, r)| {
+            let res = (|| {
+                let hc = hclips.get(&h.episode_id).ok_or_else(|| {
+                    format!(
+                        "human episode {} has no rows in the {} table",
+                        h.episode_id,
+                        match kind.human_source() {
+                            ClipSource::Frames => "frames",
+                            ClipSource::Imagined => "imagined",
+                        }
+                    )
+                })?;
+                let rc = rclips
+                    .get(&r.episode_id)
+                    .ok_or_else(|| format!("robot episode {} has no frames", r.episode_id))?;
+                let (al, d, edge) = align_pair(kind, hc, rc, opts)?;
+                let per_dim = al.normalized / d.max(1) as f64;
+                let (mean_err, max_err) = match opts.truth.get(*p) {
+                    Some(t) if t.len() == hc.images.len() => {
+                        let got = row_to_col(&al.path, hc.images.len());
+                        let errs: Vec<usize> = got.iter().zip(t).map(|(a, b)| a.abs_diff(*b)).collect();
+                        (
+                            Some(errs.iter().sum::<usize>() as f64 / errs.len() as f64),
+                            errs.iter().max().copied(),
+                        )
+                    }
+                    Some(t) => {
+                        return Err(format!(
+                            "ground truth has {} frames, the human clip {}",
+                            t.len(),
+                            hc.images.len()
+                        ));
+                    }
+                    None => (None, None),
+                };
+                Ok((
+                    PairSummary {
+                        pair_id: (*p).clone(),
+                        human_episode_id: h.episode_id.clone(),
+                        robot_episode_id: r.episode_id.clone(),
+                        human_frames: hc.images.len(),
+                        robot_frames: rc.images.len(),
+                        normalized_cost: al.normalized,
+                        cost_per_dim: per_dim,
+                        path_length: al.path.len(),
+                        band_edge_fraction: edge,
+                        trusted: per_dim <= opts.max_cost && edge <= 0.1,
+                        mean_frame_error: mean_err,
+                        max_frame_error: max_err,
+                    },
+                    al,
+                ))
+            })();
+            progress();
+            ((*p).clone(), res)
+        })
+        .collect();
+    let mut aligned = Vec::new();
+    for (p, r) in results {
+        match r {
+            Ok(x) => aligned.push(x),
+            Err(message) => failed.push(PairError { pair_id: p, message }),
+        }
+    }
+    failed.sort_by(|a, b| a.pair_id.cmp(&b.pair_id));
+    let mut parts = vec![
+        "milv-align/1".to_string(),
+        kind.name().into(),
+        format!("{:?}", opts.step),
+        opts.band.to_string(),
+    ];
+    parts.extend(model.clone());
+    parts.extend(ds.files(TableKind::Frames, v)?.into_iter().map(|f| f.info.path));
+    parts.extend(pairs.keys().cloned());
+    let run_id = milv_data::run_id(&parts);
+    let with_truth: Vec<&PairSummary> = aligned
+        .iter()
+        .map(|(s, _)| s)
+        .filter(|s| s.mean_frame_error.is_some())
+        .collect();
+    let mut report = AlignReport {
+        read_version: v,
+        version: ds.latest_version()?,
+        run_id: run_id.clone(),
+        features: kind.name().into(),
+        pairs: aligned.iter().map(|(s, _)| s.clone()).collect(),
+        failed,
+        rows: aligned.iter().map(|(_, a)| a.path.len() as u64).sum(),
+        mean_frame_error: (!with_truth.is_empty()).then(|| {
+            with_truth.iter().filter_map(|s| s.mean_frame_error).sum::<f64>() / with_truth.len() as f64
+        }),
+        max_frame_error: with_truth.iter().filter_map(|s| s.max_frame_error).max(),
+    };
+    if aligned.is_empty() {
+        return Ok(report);
+    }
+    meta.summary = serde_json::json!({
+        "run_id": run_id, "features": kind.name(), "band": opts.band, "step": opts.step, "model_id": model,
+        "pairs": report.pairs.len(), "failed": report.failed.len(), "rows": report.rows,
+        "untrusted": report.pairs.iter().filter(|p| !p.trusted).map(|p| &p.pair_id).collect::<Vec<_>>(),
+    });
+    let mut txn = ds.begin(meta)?;
+    let mut w = txn.shard_writer(TableKind::Alignments, ShardOptions::default())?;
+    let mut ids = Vec::new();
+    let written = (|| -> Result<()> {
+        for (s, al) in &aligned {
+            w.begin_episode()?;
+            w.push(rows_batch(s, al, kind.name(), &run_id)?)?;
+            w.end_episode()?;
+            ids.push(s.pair_id.clone());
+        }
+        Ok(())
+    })();
+    if let Err(e) = written {
+        w.abort();
+        txn.abort();
+        return Err(e);
+    }
+    txn.add_files(TableKind::Alignments, w.finish()?, ids);
+    report.version = txn.commit()?;
+    Ok(report)
+}
+
+fn rows_batch(s: &PairSummary, al: &Alignment, features: &str, run_id: &str) -> Result<RecordBatch> {
+    let n = al.path.len();
+    let cols: Vec<ArrayRef> = vec![
+        Arc::new(StringArray::from(vec![s.pair_id.as_str(); n])),
+        Arc::new(StringArray::from(vec![s.human_episode_id.as_str(); n])),
+        Arc::new(Int32Array::from_iter_values(al.path.iter().map(|p| p.0 as i32))),
+        Arc::new(StringArray::from(vec![s.robot_episode_id.as_str(); n])),
+        Arc::new(Int32Array::from_iter_values(al.path.iter().map(|p| p.1 as i32))),
+        Arc::new(Float64Array::from(al.local.clone())),
+        Arc::new(StringArray::from(vec![features; n])),
+        Arc::new(StringArray::from(vec![run_id; n])),
+    ];
+    Ok(RecordBatch::try_new(TableKind::Alignments.arrow_schema(), cols)?)
+}

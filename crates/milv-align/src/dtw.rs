@@ -1,0 +1,432 @@
+//! Dynamic time warping inside a Sakoe–Chiba band, in O(n·band) memory.
+//!
+//! Rows are the first sequence (human frames), columns the second (robot frames). Each
+//! row keeps only the columns of its band: the accumulated cost and a 2-bit back pointer
+//! per cell, so a 1,000 × 1,000 alignment with a 10 % band stores ~200 k cells, not 1 M.
+
+use crate::Error;
+
+/// A matrix of per-frame feature vectors, row-major (`n` frames × `d` values).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Features {
+    pub n: usize,
+    pub d: usize,
+    pub data: Vec<f64>,
+}
+
+impl Features {
+    pub fn new(n: usize, d: usize, data: Vec<f64>) -> Result<Self, Error> {
+        if data.len() != n * d {
+            return Err(Error::Invalid(format!(
+                "features: {} values for {n} frames of {d}",
+                data.len()
+            )));
+        }
+        Ok(Features { n, d, data })
+    }
+
+    pub fn row(&self, i: usize) -> &[f64] {
+        &self.data[i * self.d..(i + 1) * self.d]
+    }
+
+    /// Each dimension shifted and scaled to mean 0, standard deviation 1 over the clip
+    /// (a constant dimension becomes 0).
+    pub fn z_normalized(mut self) -> Self {
+        let n = self.n.max(1) as f64;
+        for k in 0..self.d {
+            let col = || (0..self.n).map(|i| self.data[i * self.d + k]);
+            let mean = col().sum::<f64>() / n;
+            let var = col().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n;
+            let sd = var.sqrt();
+            for i in 0..self.n {
+                let v = &mut self.data[i * self.d + k];
+                *v = if sd > 1e-12 { (*v - mean) / sd } else { 0.0 };
+            }
+        }
+        self
+    }
+}
+
+/// Which predecessors a cell may come from, and how the local cost is weighted.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum StepPattern {
+    /// `D(i,j) = d(i,j) + min(D(i−1,j−1), D(i−1,j), D(i,j−1))`.
+    Symmetric1,
+    /// Diagonal steps pay `2·d(i,j)`: not biased towards diagonal shortcuts; cost
+    /// normalised by `n + m`.
+    Symmetric2,
+    /// Every row advances by one: `D(i,j) = d(i,j) + min(D(i−1,j), D(i−1,j−1), D(i−1,j−2))`,
+    /// so each human frame gets exactly one robot frame (the robot clip may skip frames).
+    Asymmetric,
+}
+
+impl std::str::FromStr for StepPattern {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "symmetric1" => Ok(Self::Symmetric1),
+            "symmetric2" => Ok(Self::Symmetric2),
+            "asymmetric" => Ok(Self::Asymmetric),
+            _ => Err(format!(
+                "unknown step pattern {s:?} (symmetric1 | symmetric2 | asymmetric)"
+            )),
+        }
+    }
+}
+
+/// The allowed columns `lo[i] ..= hi[i]` of each row.
+#[derive(Clone, Debug)]
+pub struct Band {
+    lo: Vec<usize>,
+    hi: Vec<usize>,
+}
+
+impl Band {
+    /// Sakoe–Chiba band of half-width `w` columns around the diagonal from (0, 0) to
+    /// (n−1, m−1) (the slope follows the length ratio, so clips of different lengths work).
+    pub fn around_diagonal(n: usize, m: usize, w: usize) -> Band {
+        let slope = if n > 1 {
+            (m - 1) as f64 / (n - 1) as f64
+        } else {
+            0.0
+        };
+        // Rows must overlap enough for a connected path: at least the slope's step.
+        let w = w.max(slope.ceil() as usize).max(1);
+        let (lo, hi) = (0..n)
+            .map(|i| {
+                let c = (i as f64 * slope).round() as usize;
+                (c.saturating_sub(w), (c + w).min(m - 1))
+            })
+            .unzip();
+        Band { lo, hi }
+    }
+
+    /// `|i − j| ≤ w` (the classic band for equal lengths, as `dtaidistance`'s `window`).
+    pub fn absolute(n: usize, m: usize, w: usize) -> Band {
+        let w = w.max(n.abs_diff(m));
+        let (lo, hi) = (0..n).map(|i| (i.saturating_sub(w), (i + w).min(m - 1))).unzip();
+        Band { lo, hi }
+    }
+
+    /// The whole matrix.
+    pub fn full(n: usize, m: usize) -> Band {
+        Band {
+            lo: vec![0; n],
+            hi: vec![m - 1; n],
+        }
+    }
+
+    pub fn cells(&self) -> usize {
+        self.lo.iter().zip(&self.hi).map(|(l, h)| h + 1 - l).sum()
+    }
+}
+
+/// The result of aligning two sequences.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Alignment {
+    /// Aligned cells `(i, j)`, from (0, 0) to (n−1, m−1).
+    pub path: Vec<(usize, usize)>,
+    /// Local cost `d(i, j)` of each path cell.
+    pub local: Vec<f64>,
+    /// Accumulated cost `D(n−1, m−1)`.
+    pub total: f64,
+    /// `total` divided by the step pattern's normaliser (path length, or `n + m`).
+    pub normalized: f64,
+    /// Cells evaluated (the band's area).
+    pub cells: usize,
+}
+
+/// Squared Euclidean distance of two feature rows (the local cost). Eight partial sums,
+/// so the loop vectorises instead of waiting on one chain of additions.
+#[inline]
+pub fn sq_dist(a: &[f64], b: &[f64]) -> f64 {
+    let (ac, at) = a.as_chunks::<8>();
+    let (bc, bt) = b[..a.len()].as_chunks::<8>();
+    let mut acc = [0.0f64; 8];
+    for (x, y) in ac.iter().zip(bc) {
+        for k in 0..8 {
+            let d = x[k] - y[k];
+            acc[k] += d * d;
+        }
+    }
+    let tail: f64 = at.iter().zip(bt).map(|(x, y)| (x - y) * (x - y)).sum();
+    acc.iter().sum::<f64>() + tail
+}
+
+const DIAG: u8 = 0;
+const UP: u8 = 1; // from (i−1, j)
+const LEFT: u8 = 2; // from (i, j−1)
+const SKIP: u8 = 3; // from (i−1, j−2), asymmetric only
+
+/// Aligns `a` (rows) with `b` (columns) inside `band`; `keep_path` false computes only the
+/// cost (O(band) memory). Local cost: squared Euclidean distance of feature rows.
+pub fn dtw(
+    a: &Features,
+    b: &Features,
+    band: &Band,
+    step: StepPattern,
+    keep_path: bool,
+) -> Result<Alignment, Error> {
+    let (n, m) = (a.n, b.n);
+    if n == 0 || m == 0 {
+        return Err(Error::Invalid(format!(
+            "cannot align an empty clip ({n} x {m} frames)"
+        )));
+    }
+    if a.d != b.d {
+        return Err(Error::Invalid(format!(
+            "feature widths differ: {} and {}",
+            a.d, b.d
+        )));
+    }
+    if band.lo.len() != n || band.hi.iter().any(|&h| h >= m) {
+        return Err(Error::Invalid(format!("band does not fit a {n} x {m} matrix")));
+    }
+    let inf = f64::INFINITY;
+    // Offsets of each row's band in the back-pointer store.
+    let mut offsets = Vec::with_capacity(if keep_path { n + 1 } else { 0 });
+    let mut back: Vec<u8> = Vec::new();
+    if keep_path {
+        let mut o = 0;
+        for i in 0..n {
+            offsets.push(o);
+            o += band.hi[i] + 1 - band.lo[i];
+        }
+        offsets.push(o);
+        back = vec![0; o];
+    }
+    // Two rows of accumulated cost, indexed by absolute column; reads outside the
+    // previous row's band (or left of this row's) count as unreachable.
+    let mut prev = vec![inf; m];
+    let mut cur = vec![inf; m];
+    for i in 0..n {
+        let (lo, hi) = (band.lo[i], band.hi[i]);
+        let (plo, phi) = if i > 0 {
+            (band.lo[i - 1], band.hi[i - 1])
+        } else {
+            (1, 0)
+        };
+        let p = |j: usize| if (plo..=phi).contains(&j) { prev[j] } else { inf };
+        let ar = a.row(i);
+        for j in lo..=hi {
+            let d = sq_dist(ar, b.row(j));
+            let (best, from) = if i == 0 && j == 0 {
+                let first = if step == StepPattern::Symmetric2 {
+                    2.0 * d
+                } else {
+                    d
+                };
+                (first, DIAG)
+            } else {
+                let diag = if j > 0 { p(j - 1) } else { inf };
+                let up = p(j);
+                let left = if j > lo { cur[j - 1] } else { inf };
+                match step {
+                    StepPattern::Symmetric1 => {
+                        let (mut v, mut f) = (diag, DIAG);
+                        if up < v {
+                            (v, f) = (up, UP);
+                        }
+                        if left < v {
+                            (v, f) = (left, LEFT);
+                        }
+                        (v + d, f)
+                    }
+                    StepPattern::Symmetric2 => {
+                        let (mut v, mut f) = (diag + 2.0 * d, DIAG);
+                        if up + d < v {
+                            (v, f) = (up + d, UP);
+                        }
+                        if left + d < v {
+                            (v, f) = (left + d, LEFT);
+                        }
+                        (v, f)
+                    }
+                    StepPattern::Asymmetric => {
+                        let skip = if j > 1 { p(j - 2) } else { inf };
+                        let (mut v, mut f) = (diag, DIAG);
+                        if up < v {
+                            (v, f) = (up, UP);
+                        }
+                        if skip < v {
+                            (v, f) = (skip, SKIP);
+                        }
+                        (v + d, f)
+                    }
+                }
+            };
+            cur[j] = best;
+            if keep_path {
+                back[offsets[i] + j - lo] = from;
+            }
+        }
+        std::mem::swap(&mut prev, &mut cur);
+    }
+    let (llo, lhi) = (band.lo[n - 1], band.hi[n - 1]);
+    let total = if (llo..=lhi).contains(&(m - 1)) {
+        prev[m - 1]
+    } else {
+        inf
+    };
+    if !total.is_finite() {
+        return Err(Error::Invalid(format!(
+            "no warping path within the band for {n} x {m} frames (widen --band{})",
+            if step == StepPattern::Asymmetric && m > 2 * n {
+                "; asymmetric steps cannot skip more than every other robot frame"
+            } else {
+                ""
+            }
+        )));
+    }
+    let mut path = Vec::new();
+    let mut local = Vec::new();
+    if keep_path {
+        let (mut i, mut j) = (n - 1, m - 1);
+        loop {
+            path.push((i, j));
+            local.push(sq_dist(a.row(i), b.row(j)));
+            if i == 0 && j == 0 {
+                break;
+            }
+            match back[offsets[i] + j - band.lo[i]] {
+                DIAG => {
+                    i -= 1;
+                    j -= 1;
+                }
+                UP => i -= 1,
+                LEFT => j -= 1,
+                _ => {
+                    i -= 1;
+                    j -= 2;
+                }
+            }
+        }
+        path.reverse();
+        local.reverse();
+    }
+    let norm = match step {
+        StepPattern::Symmetric2 => (n + m) as f64,
+        StepPattern::Asymmetric => n as f64,
+        StepPattern::Symmetric1 if keep_path => path.len() as f64,
+        StepPattern::Symmetric1 => n.max(m) as f64,
+    };
+    Ok(Alignment {
+        path,
+        local,
+        total,
+        normalized: total / norm,
+        cells: band.cells(),
+    })
+}
+
+/// For each row `i`, the column it is aligned to: the rounded mean of the path's
+/// columns on that row.
+pub fn row_to_col(path: &[(usize, usize)], n: usize) -> Vec<usize> {
+    let mut sum = vec![0usize; n];
+    let mut cnt = vec![0usize; n];
+    for &(i, j) in path {
+        sum[i] += j;
+        cnt[i] += 1;
+    }
+    sum.iter()
+        .zip(&cnt)
+        .map(|(s, c)| ((*s as f64) / (*c).max(1) as f64).round() as usize)
+        .collect()
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    fn seq(v: &[f64]) -> Features {
+        Features::new(v.len(), 1, v.to_vec()).unwrap()
+    }
+
+    /// Plain O(n·m) DTW (symmetric1, squared distance) as a reference.
+    fn reference(a: &[f64], b: &[f64]) -> f64 {
+        let (n, m) = (a.len(), b.len());
+        let mut d = vec![vec![f64::INFINITY; m + 1]; n + 1];
+        d[0][0] = 0.0;
+        for i in 1..=n {
+            for j in 1..=m {
+                let c = (a[i - 1] - b[j - 1]).powi(2);
+                d[i][j] = c + d[i - 1][j - 1].min(d[i - 1][j]).min(d[i][j - 1]);
+            }
+        }
+        d[n][m]
+    }
+
+    #[test]
+    fn full_band_equals_the_textbook_recursion() {
+        let a: Vec<f64> = (0..23).map(|i| ((i * 7) % 11) as f64).collect();
+        let b: Vec<f64> = (0..31).map(|i| ((i * 5) % 13) as f64 * 0.8).collect();
+        let al = dtw(
+            &seq(&a),
+            &seq(&b),
+            &Band::full(23, 31),
+            StepPattern::Symmetric1,
+            true,
+        )
+        .unwrap();
+        assert!((al.total - reference(&a, &b)).abs() < 1e-9);
+        assert_eq!(al.path.first(), Some(&(0, 0)));
+        assert_eq!(al.path.last(), Some(&(22, 30)));
+        assert!((al.local.iter().sum::<f64>() - al.total).abs() < 1e-9);
+        let no_path = dtw(
+            &seq(&a),
+            &seq(&b),
+            &Band::full(23, 31),
+            StepPattern::Symmetric1,
+            false,
+        )
+        .unwrap();
+        assert_eq!(no_path.total, al.total);
+        // Steps are unit moves.
+        for w in al.path.windows(2) {
+            let (di, dj) = (w[1].0 - w[0].0, w[1].1 - w[0].1);
+            assert!(di <= 1 && dj <= 1 && di + dj >= 1);
+        }
+    }
+
+    #[test]
+    fn a_time_warp_is_recovered() {
+        // b is a slowed-down copy of a: b[j] = a[j * 2 / 3].
+        let a: Vec<f64> = (0..40)
+            .map(|i| (i as f64 * 0.3).sin() + i as f64 * 0.05)
+            .collect();
+        let b: Vec<f64> = (0..60).map(|j| a[j * 2 / 3]).collect();
+        for step in [
+            StepPattern::Symmetric1,
+            StepPattern::Symmetric2,
+            StepPattern::Asymmetric,
+        ] {
+            let al = dtw(&seq(&a), &seq(&b), &Band::around_diagonal(40, 60, 6), step, true).unwrap();
+            let map = row_to_col(&al.path, 40);
+            for (i, &j) in map.iter().enumerate() {
+                assert!((b[j] - a[i]).abs() < 0.2, "{step:?}: row {i} -> {j}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_band_bounds_memory_and_too_narrow_bands_fail() {
+        let band = Band::around_diagonal(1000, 1000, 50);
+        assert!(band.cells() < 1000 * 101 + 1);
+        let a = seq(&[0.0, 1.0, 2.0]);
+        let b = seq(&(0..20).map(f64::from).collect::<Vec<_>>());
+        // Asymmetric steps can take at most 2 columns per row.
+        assert!(dtw(&a, &b, &Band::full(3, 20), StepPattern::Asymmetric, true).is_err());
+        assert!(
+            dtw(
+                &a,
+                &Features::default(),
+                &Band::full(3, 1),
+                StepPattern::Symmetric1,
+                true
+            )
+            .is_err()
+        );
+    }
+}

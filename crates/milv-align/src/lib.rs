@@ -1,0 +1,32 @@
+//! # milv-align — frame correspondences of loosely paired human/robot clips
+//!
+//! A-CycleGAN's auxiliary loss (paper eq. 7) needs, for a human clip and a robot clip of
+//! the same motion (episodes sharing a `pair_id`), which robot frame goes with which
+//! human frame. The clips differ in length, speed, embodiment and viewpoint.
+//!
+//! | module | what |
+//! |---|---|
+//! | [`dtw`] | banded DTW (Sakoe–Chiba, O(n·band) memory), step patterns, [`Features`] |
+//! | [`features`] | the [`FeatureKind`] trait and its kinds: `motion`, `state`, `translated` |
+//! | [`align`] | [`align_dataset`]: every pair of a dataset version, in parallel, into the `alignments` table; per-pair summaries and ground-truth errors |
+
+pub mod align;
+pub mod dtw;
+pub mod features;
+
+pub use align::{AlignOptions, AlignReport, PairSummary, align_dataset, load_pair};
+pub use dtw::{Alignment, Band, Features, StepPattern, dtw, row_to_col};
+pub use features::{Clip, FeatureKind};
+
+/// Why a pair or a run could not be aligned.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    #[error(transparent)]
+    Data(#[from] milv_data::Error),
+    #[error("arrow: {0}")]
+    Arrow(#[from] milv_data::arrow::error::ArrowError),
+    #[error("{0}")]
+    Invalid(String),
+}
+
+pub type Result<T> = std::result::Result<T, Error>;

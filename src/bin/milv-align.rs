@@ -1,0 +1,293 @@
+//! `milv-align`: frame correspondences of loosely paired human/robot clips (banded DTW).
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::{Context as _, bail};
+use clap::{Parser, Subcommand};
+use milv::align::{AlignOptions, StepPattern, align_dataset, features, load_pair};
+use milv::cli;
+use milv::data::{CommitMeta, Dataset, DatasetRef, Partition};
+
+/// Aligns every pair of a dataset version (episodes sharing a pair_id: one human, one
+/// robot clip of the same motion) by dynamic time warping inside a Sakoe-Chiba band, and
+/// commits the `alignments` table (one row per aligned frame pair, with its cost) as a
+/// new version. Prints a per-pair summary: normalised cost, path length, and a trust flag
+/// for pairs whose cost is high or whose path runs along the band's edge.
+///
+///   milv-align DATASET[@V] --features motion|state|translated [--band F] [--jobs N]
+///   milv-align show DATASET[@V] PAIR -o cost.png
+#[derive(Parser, Debug)]
+#[command(version, args_conflicts_with_subcommands = true)]
+struct Args {
+    #[command(subcommand)]
+    cmd: Option<Cmd>,
+    #[command(flatten)]
+    run: RunArgs,
+}
+
+#[derive(clap::Args, Debug)]
+struct RunArgs {
+    /// DATASET or DATASET@VERSION to read (the new version is added on top of the latest).
+    dataset: Option<DatasetRef>,
+    #[command(flatten)]
+    common: Common,
+    /// Only these pair ids (comma-separated or repeated).
+    #[arg(long, value_delimiter = ',')]
+    pairs: Vec<String>,
+    /// Pairs aligned at once (default: all cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Align only share i of n of the pairs (array jobs): i/n.
+    #[arg(long)]
+    partition: Option<Partition>,
+    /// Ground-truth correspondences (JSON lines {pair_id, human_to_robot}, e.g. the
+    /// warps.jsonl of `milv-sim gen`): report the frame error of each pair.
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    #[arg(long)]
+    json: bool,
+}
+
+#[derive(clap::Args, Debug, Clone)]
+struct Common {
+    /// motion: frame-difference energy and where it happens (any clip); state: the
+    /// episodes' state vectors (e.g. end-effector position); translated: the human clip
+    /// translated to the robot domain (imagined table) against the robot frames.
+    #[arg(long, default_value = "motion")]
+    features: String,
+    /// Band half-width as a fraction of the longer clip.
+    #[arg(long, default_value_t = 0.2)]
+    band: f64,
+    /// symmetric1 | symmetric2 | asymmetric (each human frame gets one robot frame).
+    #[arg(long, default_value = "symmetric2")]
+    step: StepPattern,
+    /// Translation model for --features translated (default: the only one).
+    #[arg(long)]
+    model_id: Option<String>,
+    /// Pairs above this normalised cost per feature dimension are flagged untrusted.
+    #[arg(long, default_value_t = 0.5)]
+    max_cost: f64,
+}
+
+#[derive(Subcommand, Debug)]
+enum Cmd {
+    /// Times banded DTW (symmetric1, squared Euclidean local cost, |i − j| < WINDOW as
+    /// dtaidistance's `window`) on two feature files of raw little-endian f64 (frames ×
+    /// DIM); used by tools/bench/align.py.
+    Bench {
+        a: PathBuf,
+        b: PathBuf,
+        #[arg(long)]
+        dim: usize,
+        #[arg(long)]
+        window: usize,
+        #[arg(long, default_value_t = 10)]
+        iters: usize,
+    },
+    /// Writes a PNG of one pair's cost matrix (human frames down, robot frames across)
+    /// with the warping path, to see whether an alignment can be trusted.
+    Show {
+        dataset: DatasetRef,
+        pair: String,
+        #[arg(short, long)]
+        out: PathBuf,
+        #[command(flatten)]
+        common: Common,
+    },
+}
+
+fn options(c: &Common) -> AlignOptions {
+    AlignOptions {
+        band: c.band,
+        step: c.step,
+        model_id: c.model_id.clone(),
+        max_cost: c.max_cost,
+        ..AlignOptions::default()
+    }
+}
+
+fn read_truth(path: &std::path::Path) -> anyhow::Result<BTreeMap<String, Vec<usize>>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut out = BTreeMap::new();
+    for (k, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        let v: serde_json::Value =
+            serde_json::from_str(line).with_context(|| format!("{}:{}: not JSON", path.display(), k + 1))?;
+        let (Some(p), Some(m)) = (v["pair_id"].as_str(), v["human_to_robot"].as_array()) else {
+            bail!("{}:{}: needs pair_id and human_to_robot", path.display(), k + 1);
+        };
+        let m: Option<Vec<usize>> = m.iter().map(|x| x.as_u64().map(|x| x as usize)).collect();
+        out.insert(
+            p.to_string(),
+            m.with_context(|| format!("{}:{}: bad frame numbers", path.display(), k + 1))?,
+        );
+    }
+    Ok(out)
+}
+
+fn run_align(a: RunArgs) -> anyhow::Result<u8> {
+    let Some(dataset) = a.dataset else {
+        bail!("give a DATASET (see --help)");
+    };
+    if let Some(j) = a.jobs {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(j.max(1))
+            .build_global()?;
+    }
+    let kind = features::by_name(&a.common.features)?;
+    let mut opts = options(&a.common);
+    opts.pairs = (!a.pairs.is_empty()).then(|| a.pairs.into_iter().collect());
+    opts.partition = a.partition;
+    if let Some(t) = &a.truth {
+        opts.truth = read_truth(t)?;
+    }
+    let ds = Dataset::open(&dataset.root).with_context(|| format!("opening {dataset}"))?;
+    let bar = cli::bar(0, "pairs aligned");
+    let rep = align_dataset(
+        &ds,
+        dataset.version,
+        kind,
+        &opts,
+        CommitMeta::for_this_process("milv-align", "align"),
+        &|| bar.inc(1),
+    );
+    bar.finish_and_clear();
+    let rep = rep?;
+    for f in &rep.failed {
+        eprintln!("milv-align: error: pair {}: {}", f.pair_id, f.message);
+    }
+    if a.json {
+        cli::print_json(&rep)?;
+    } else {
+        println!(
+            "{}@{}: aligned {} pairs on {} features ({} rows, run {}, read @{})",
+            ds.root().display(),
+            rep.version,
+            rep.pairs.len(),
+            rep.features,
+            rep.rows,
+            rep.run_id,
+            rep.read_version
+        );
+        println!(
+            "{:<28} {:>6} {:>6} {:>10} {:>6} {:>7} {:>9}",
+            "pair", "human", "robot", "cost/dim", "path", "trusted", "err mean"
+        );
+        for p in &rep.pairs {
+            println!(
+                "{:<28} {:>6} {:>6} {:>10.4} {:>6} {:>7} {:>9}",
+                p.pair_id,
+                p.human_frames,
+                p.robot_frames,
+                p.cost_per_dim,
+                p.path_length,
+                if p.trusted { "yes" } else { "NO" },
+                p.mean_frame_error.map_or("-".into(), |e| format!("{e:.2}"))
+            );
+        }
+        if let (Some(m), Some(x)) = (rep.mean_frame_error, rep.max_frame_error) {
+            println!("frame error against ground truth: mean {m:.3}, max {x}");
+        }
+    }
+    Ok(match (rep.pairs.is_empty(), rep.failed.is_empty()) {
+        (_, true) => cli::EXIT_OK,
+        (true, false) => cli::EXIT_FATAL,
+        (false, false) => cli::EXIT_PARTIAL,
+    })
+}
+
+fn read_f64(path: &std::path::Path, dim: usize) -> anyhow::Result<milv::align::Features> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let data: Vec<f64> = bytes
+        .chunks_exact(8)
+        .map(|c| f64::from_le_bytes(c.try_into().unwrap_or([0; 8])))
+        .collect();
+    if dim == 0 || !data.len().is_multiple_of(dim) {
+        bail!(
+            "{}: {} values are not frames of {dim}",
+            path.display(),
+            data.len()
+        );
+    }
+    Ok(milv::align::Features::new(data.len() / dim, dim, data)?)
+}
+
+fn bench(
+    a: &std::path::Path,
+    b: &std::path::Path,
+    dim: usize,
+    window: usize,
+    iters: usize,
+) -> anyhow::Result<u8> {
+    use milv::align::{Band, dtw};
+    let (fa, fb) = (read_f64(a, dim)?, read_f64(b, dim)?);
+    let band = Band::absolute(fa.n, fb.n, window.saturating_sub(1));
+    let time = |keep_path: bool| -> anyhow::Result<(f64, f64)> {
+        let first = dtw(&fa, &fb, &band, StepPattern::Symmetric1, keep_path)?;
+        let t0 = std::time::Instant::now();
+        for _ in 0..iters.max(1) {
+            std::hint::black_box(dtw(&fa, &fb, &band, StepPattern::Symmetric1, keep_path)?);
+        }
+        Ok((
+            t0.elapsed().as_secs_f64() / iters.max(1) as f64,
+            first.total.sqrt(),
+        ))
+    };
+    let (t_dist, d) = time(false)?;
+    let (t_path, _) = time(true)?;
+    cli::print_json(&serde_json::json!({
+        "n": fa.n, "m": fb.n, "dim": dim, "window": window, "cells": band.cells(),
+        "seconds_distance": t_dist, "seconds_with_path": t_path, "distance": d,
+        // What the DP keeps: two cost rows, plus one byte per band cell for the path.
+        "bytes_distance": 2 * fb.n * 8, "bytes_with_path": band.cells() + 2 * fb.n * 8,
+    }))?;
+    Ok(cli::EXIT_OK)
+}
+
+fn run(args: Args) -> anyhow::Result<u8> {
+    match args.cmd {
+        None => run_align(args.run),
+        Some(Cmd::Bench {
+            a,
+            b,
+            dim,
+            window,
+            iters,
+        }) => bench(&a, &b, dim, window, iters),
+        Some(Cmd::Show {
+            dataset,
+            pair,
+            out,
+            common,
+        }) => {
+            let ds = Dataset::open(&dataset.root).with_context(|| format!("opening {dataset}"))?;
+            let kind = features::by_name(&common.features)?;
+            let (h, r, al) = load_pair(&ds, dataset.version, &pair, kind, &options(&common))?;
+            let cost: Vec<f64> = (0..h.n)
+                .flat_map(|i| (0..r.n).map(move |j| (i, j)))
+                .map(|(i, j)| milv::align::dtw::sq_dist(h.row(i), r.row(j)))
+                .collect();
+            milv::plot::heatmap_png(
+                &out,
+                &cost,
+                h.n,
+                r.n,
+                &format!(
+                    "pair {pair}: {} cost, normalised {:.4}",
+                    kind.name(),
+                    al.normalized
+                ),
+                "robot frame",
+                "human frame",
+                Some(&al.path),
+            )?;
+            println!("wrote {}", out.display());
+            Ok(cli::EXIT_OK)
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    cli::finish("milv-align", run(Args::parse()))
+}

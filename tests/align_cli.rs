@@ -1,0 +1,158 @@
+//! `milv-align` on simulated pairs with a known time warp, and on broken pairs.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use common::*;
+
+fn align_bin() -> &'static str {
+    env!("CARGO_BIN_EXE_milv-align")
+}
+
+fn align_json(args: &[&str]) -> (i32, serde_json::Value, String) {
+    let mut a = args.to_vec();
+    a.push("--json");
+    let out = run(align_bin(), &a);
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    let v = if out.stdout.is_empty() {
+        serde_json::Value::Null
+    } else {
+        stdout_json(&out)
+    };
+    (out.status.code().unwrap_or(-1), v, err)
+}
+
+#[test]
+fn simulated_pairs_align_within_the_goals() {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim");
+    let r = run(
+        env!("CARGO_BIN_EXE_milv-sim"),
+        &[
+            "gen",
+            "--task",
+            "drawing",
+            "--episodes",
+            "8",
+            "--seed",
+            "7",
+            "--out",
+            path_str(&sim),
+        ],
+    );
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let ds = dir.path().join("ds");
+    let manifest = sim.join("manifest.jsonl");
+    let (code, _) = ingest(&[path_str(&ds), "--manifest", path_str(&manifest)]);
+    assert_eq!(code, 0);
+    let truth = sim.join("warps.jsonl");
+    let ds_s = path_str(&ds);
+    let mut rows = 0;
+    for (features, goal) in [("state", 1.0), ("motion", 2.0)] {
+        let (code, rep, err) = align_json(&[ds_s, "--features", features, "--truth", path_str(&truth)]);
+        assert_eq!(code, 0, "{err}");
+        let pairs = rep["pairs"].as_array().unwrap();
+        assert_eq!(pairs.len(), 8);
+        let mean = rep["mean_frame_error"].as_f64().unwrap();
+        assert!(mean <= goal, "{features}: mean frame error {mean} > {goal}");
+        for p in pairs {
+            // Paths run from (0, 0) to the last frames, one row per aligned cell.
+            assert!(p["path_length"].as_u64().unwrap() >= p["human_frames"].as_u64().unwrap());
+        }
+        rows += rep["rows"].as_u64().unwrap();
+    }
+    let info = ds_json(&["info", ds_s]);
+    assert_eq!(info["tables"]["alignments"]["rows"].as_u64().unwrap(), rows);
+    assert_eq!(
+        ds_json(&["verify", ds_s])["problems"].as_array().unwrap().len(),
+        0
+    );
+
+    let png = dir.path().join("cost.png");
+    let out = run(
+        align_bin(),
+        &[
+            "show",
+            ds_s,
+            "drawing-7-0000",
+            "-o",
+            path_str(&png),
+            "--features",
+            "state",
+        ],
+    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let img = image::open(&png).unwrap();
+    assert!(img.width() > 200 && img.height() > 200);
+
+    // No imagined table yet: translated features say what is missing.
+    let (code, _, err) = align_json(&[ds_s, "--features", "translated"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("milv-train translate"), "{err}");
+}
+
+#[test]
+fn broken_pairs_fail_one_by_one_and_the_others_align() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = dir.path().join("src");
+    std::fs::create_dir(&src).unwrap();
+    let mut clips = Vec::new();
+    let mut add = |name: &str, frames: u32, domain: &str, pair: &str, seed: u32| {
+        let clip = src.join(name);
+        make_clip(&clip, frames, 48, 40, seed);
+        write_sidecar(
+            &clip.with_extension("json"),
+            frames as usize,
+            domain,
+            serde_json::json!({"pair_id": pair, "kind": "paired"}),
+        );
+        clips.push(clip);
+    };
+    add("good_h.mp4", 10, "human", "good", 1);
+    add("good_r.mp4", 12, "robot", "good", 2);
+    add("alone_h.mp4", 8, "human", "alone", 3);
+    add("three_a.mp4", 8, "human", "three", 4);
+    add("three_b.mp4", 8, "robot", "three", 5);
+    add("three_c.mp4", 9, "robot", "three", 6);
+    add("same_a.mp4", 8, "robot", "same", 7);
+    add("same_b.mp4", 9, "robot", "same", 8);
+    add("one_h.mp4", 1, "human", "one", 9);
+    add("one_r.mp4", 8, "robot", "one", 10);
+    let ds = dir.path().join("ds");
+    let mut args = vec![path_str(&ds)];
+    args.extend(clips.iter().map(|c| path_str(c)));
+    let (code, _) = ingest(&args);
+    assert_eq!(code, 0);
+    let (code, rep, err) = align_json(&[path_str(&ds), "--features", "motion"]);
+    assert_eq!(code, 3, "{err}");
+    let pairs: Vec<&str> = rep["pairs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p["pair_id"].as_str().unwrap())
+        .collect();
+    assert_eq!(pairs, ["good"]);
+    let failed: std::collections::BTreeMap<String, String> = rep["failed"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| {
+            (
+                f["pair_id"].as_str().unwrap().to_string(),
+                f["message"].as_str().unwrap().to_string(),
+            )
+        })
+        .collect();
+    assert!(failed["alone"].contains("robot episode is missing"), "{failed:?}");
+    assert!(
+        failed["three"].contains("3 episodes share this pair id"),
+        "{failed:?}"
+    );
+    assert!(failed["same"].contains("both episodes are robot"), "{failed:?}");
+    assert!(failed["one"].contains("1 frame(s)"), "{failed:?}");
+    assert!(err.contains("pair alone:"), "{err}");
+    assert_eq!(
+        ds_json(&["info", path_str(&ds)])["tables"]["alignments"]["rows"],
+        rep["rows"]
+    );
+}
