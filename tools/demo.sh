@@ -18,8 +18,13 @@ echo "== milv-ingest: simulated tabletop episodes (samples/sim, made by milv-sim
 "$BIN/milv-ingest" "$DS" --manifest samples/sim/drawing/manifest.jsonl --manifest samples/sim/pushing/manifest.jsonl --require-actions
 echo "== milv-ingest again: a no-op (episode ids are content hashes)"
 "$BIN/milv-ingest" "$DS" --manifest samples/manifest.jsonl
-echo "== milv-align: frame correspondences of the loosely paired human/robot clips (state features)"
-"$BIN/milv-align" "$DS" --features state --truth samples/sim/drawing/warps.jsonl
+echo "== milv-align: frame correspondences of the loosely paired human/robot clips"
+echo "   (simulated pairs on their end-effector states, scored against the true time warps)"
+cat samples/sim/drawing/warps.jsonl samples/sim/pushing/warps.jsonl > "$OUT/warps.jsonl"
+SIM_PAIRS=$(sed 's/.*"pair_id":"\([^"]*\)".*/\1/' "$OUT/warps.jsonl" | paste -sd,)
+"$BIN/milv-align" "$DS" --features state --pairs "$SIM_PAIRS" --truth "$OUT/warps.jsonl"
+echo "   (every pair, from pixels alone: motion features)"
+"$BIN/milv-align" "$DS" --features motion --truth "$OUT/warps.jsonl"
 PAIR=$(head -1 samples/sim/drawing/warps.jsonl | sed 's/.*"pair_id":"\([^"]*\)".*/\1/')
 "$BIN/milv-align" show "$DS" "$PAIR" --features state -o "$OUT/align_$PAIR.png"
 echo "== milv-score run: beta_qua = Brenner x SSIM of every frame -> the scores table"
