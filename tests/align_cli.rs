@@ -10,16 +10,7 @@ fn align_bin() -> &'static str {
 }
 
 fn align_json(args: &[&str]) -> (i32, serde_json::Value, String) {
-    let mut a = args.to_vec();
-    a.push("--json");
-    let out = run(align_bin(), &a);
-    let err = String::from_utf8_lossy(&out.stderr).to_string();
-    let v = if out.stdout.is_empty() {
-        serde_json::Value::Null
-    } else {
-        stdout_json(&out)
-    };
-    (out.status.code().unwrap_or(-1), v, err)
+    run_json(align_bin(), args)
 }
 
 #[test]

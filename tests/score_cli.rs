@@ -56,16 +56,7 @@ fn frames_scores_match_the_golden_values_and_bad_clips_fail_clearly() {
 }
 
 fn score_json(args: &[&str]) -> (i32, serde_json::Value, String) {
-    let mut a = args.to_vec();
-    a.push("--json");
-    let out = run(score_bin(), &a);
-    let err = String::from_utf8_lossy(&out.stderr).to_string();
-    let v = if out.stdout.is_empty() {
-        serde_json::Value::Null
-    } else {
-        stdout_json(&out)
-    };
-    (out.status.code().unwrap_or(-1), v, err)
+    run_json(score_bin(), args)
 }
 
 #[test]

@@ -113,3 +113,17 @@ pub fn clip_with_sidecar(dir: &Path, name: &str, frames: u32, domain: &str, seed
 pub fn path_str(p: &Path) -> &str {
     p.to_str().unwrap()
 }
+
+/// Runs `bin args… --json`: exit code, the JSON on stdout (null if none), stderr.
+pub fn run_json(bin: &str, args: &[&str]) -> (i32, serde_json::Value, String) {
+    let mut a = args.to_vec();
+    a.push("--json");
+    let out = run(bin, &a);
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    let v = if out.stdout.is_empty() {
+        serde_json::Value::Null
+    } else {
+        stdout_json(&out)
+    };
+    (out.status.code().unwrap_or(-1), v, err)
+}

@@ -62,6 +62,31 @@ pub(crate) fn ssim_planes(x: &[f64], y: &[f64], w: usize, h: usize, s: &mut Scra
     Ok(sum / ((h - 2 * RADIUS) * ow) as f64)
 }
 
+/// The vector instruction sets the kernels are compiled for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Level {
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    Avx512,
+    #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
+    Avx2,
+    Baseline,
+}
+
+/// The best level this CPU runs (AVX-512 and AVX2 paths also need FMA).
+fn cpu_level() -> Level {
+    #[cfg(target_arch = "x86_64")]
+    {
+        let fma = std::arch::is_x86_feature_detected!("fma");
+        if fma && std::arch::is_x86_feature_detected!("avx512f") {
+            return Level::Avx512;
+        }
+        if fma && std::arch::is_x86_feature_detected!("avx2") {
+            return Level::Avx2;
+        }
+    }
+    Level::Baseline
+}
+
 /// Defines `fn $name` that runs `$body` compiled for AVX-512, AVX2 (both with FMA) or
 /// the baseline, whichever the CPU has. The body is the same source each time, so the
 /// results are the same on every path; only the vector width differs.
@@ -82,38 +107,30 @@ macro_rules! multiversion {
             fn avx2($($arg: $ty),*) -> $ret {
                 body($($arg),*)
             }
-            #[cfg(target_arch = "x86_64")]
-            {
-                let fma = std::arch::is_x86_feature_detected!("fma");
-                if fma && std::arch::is_x86_feature_detected!("avx512f") {
-                    // SAFETY: the CPU has AVX-512F and FMA, checked just above.
-                    return unsafe { avx512($($arg),*) };
-                }
-                if fma && std::arch::is_x86_feature_detected!("avx2") {
-                    // SAFETY: the CPU has AVX2 and FMA, checked just above.
-                    return unsafe { avx2($($arg),*) };
-                }
+            match cpu_level() {
+                // SAFETY: `cpu_level` checked that the CPU has AVX-512F and FMA.
+                #[cfg(target_arch = "x86_64")]
+                Level::Avx512 => unsafe { avx512($($arg),*) },
+                // SAFETY: `cpu_level` checked that the CPU has AVX2 and FMA.
+                #[cfg(target_arch = "x86_64")]
+                Level::Avx2 => unsafe { avx2($($arg),*) },
+                _ => body($($arg),*),
             }
-            body($($arg),*)
         }
     };
 }
 
 #[allow(unsafe_code)]
 fn dispatch(x: &[f64], y: &[f64], w: usize, h: usize, g: &[f64; TAPS], s: &mut Scratch) -> f64 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        let fma = std::arch::is_x86_feature_detected!("fma");
-        if fma && std::arch::is_x86_feature_detected!("avx512f") {
-            // SAFETY: the CPU has AVX-512F and FMA, checked just above.
-            return unsafe { x86::fused_avx512(x, y, w, h, g, s) };
-        }
-        if fma && std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 and FMA, checked just above.
-            return unsafe { x86::fused_avx2(x, y, w, h, g, s) };
-        }
+    match cpu_level() {
+        // SAFETY: `cpu_level` checked that the CPU has AVX-512F and FMA.
+        #[cfg(target_arch = "x86_64")]
+        Level::Avx512 => unsafe { x86::fused_avx512(x, y, w, h, g, s) },
+        // SAFETY: `cpu_level` checked that the CPU has AVX2 and FMA.
+        #[cfg(target_arch = "x86_64")]
+        Level::Avx2 => unsafe { x86::fused_avx2(x, y, w, h, g, s) },
+        _ => fused(x, y, w, h, g, s, hblur),
     }
-    fused(x, y, w, h, g, s, hblur)
 }
 
 /// x86-64 instantiations of [`fused`], and the AVX-512 row blur.
