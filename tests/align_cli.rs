@@ -16,41 +16,57 @@ fn align_json(args: &[&str]) -> (i32, serde_json::Value, String) {
 #[test]
 fn simulated_pairs_align_within_the_goals() {
     let dir = tempfile::tempdir().unwrap();
-    let sim = dir.path().join("sim");
-    let r = run(
-        env!("CARGO_BIN_EXE_milv-sim"),
-        &[
-            "gen",
-            "--task",
-            "drawing",
-            "--episodes",
-            "8",
-            "--seed",
-            "7",
-            "--out",
-            path_str(&sim),
-        ],
-    );
-    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
     let ds = dir.path().join("ds");
-    let manifest = sim.join("manifest.jsonl");
-    let (code, _) = ingest(&[path_str(&ds), "--manifest", path_str(&manifest)]);
-    assert_eq!(code, 0);
-    let truth = sim.join("warps.jsonl");
     let ds_s = path_str(&ds);
     let mut rows = 0;
-    for (features, goal) in [("state", 1.0), ("motion", 2.0)] {
-        let (code, rep, err) = align_json(&[ds_s, "--features", features, "--truth", path_str(&truth)]);
-        assert_eq!(code, 0, "{err}");
-        let pairs = rep["pairs"].as_array().unwrap();
-        assert_eq!(pairs.len(), 8);
-        let mean = rep["mean_frame_error"].as_f64().unwrap();
-        assert!(mean <= goal, "{features}: mean frame error {mean} > {goal}");
-        for p in pairs {
-            // Paths run from (0, 0) to the last frames, one row per aligned cell.
-            assert!(p["path_length"].as_u64().unwrap() >= p["human_frames"].as_u64().unwrap());
+    for (task, seed) in [("drawing", "7"), ("pushing", "11")] {
+        let sim = dir.path().join(task);
+        let r = run(
+            env!("CARGO_BIN_EXE_milv-sim"),
+            &[
+                "gen",
+                "--task",
+                task,
+                "--episodes",
+                "8",
+                "--seed",
+                seed,
+                "--out",
+                path_str(&sim),
+            ],
+        );
+        assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+        let manifest = sim.join("manifest.jsonl");
+        let (code, _) = ingest(&[ds_s, "--manifest", path_str(&manifest)]);
+        assert_eq!(code, 0);
+        let truth = sim.join("warps.jsonl");
+        let pairs: Vec<String> = (0..8).map(|k| format!("{task}-{seed}-{k:04}")).collect();
+        let pairs = pairs.join(",");
+        for (features, goal) in [("state", 1.0), ("motion", 2.0)] {
+            let (code, rep, err) = align_json(&[
+                ds_s,
+                "--features",
+                features,
+                "--pairs",
+                &pairs,
+                "--truth",
+                path_str(&truth),
+            ]);
+            assert_eq!(code, 0, "{err}");
+            let pairs = rep["pairs"].as_array().unwrap();
+            assert_eq!(pairs.len(), 8);
+            let mean = rep["mean_frame_error"].as_f64().unwrap();
+            assert!(
+                mean <= goal,
+                "{task} {features}: mean frame error {mean} > {goal}"
+            );
+            for p in pairs {
+                // Paths run from (0, 0) to the last frames, one row per aligned cell.
+                assert!(p["path_length"].as_u64().unwrap() >= p["human_frames"].as_u64().unwrap());
+                assert!(p["trusted"].as_bool().unwrap(), "{task} {features}: {p}");
+            }
+            rows += rep["rows"].as_u64().unwrap();
         }
-        rows += rep["rows"].as_u64().unwrap();
     }
     let info = ds_json(&["info", ds_s]);
     assert_eq!(info["tables"]["alignments"]["rows"].as_u64().unwrap(), rows);

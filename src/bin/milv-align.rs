@@ -52,9 +52,10 @@ struct RunArgs {
 
 #[derive(clap::Args, Debug, Clone)]
 struct Common {
-    /// motion: frame-difference energy and where it happens (any clip); state: the
-    /// episodes' state vectors (e.g. end-effector position); translated: the human clip
-    /// translated to the robot domain (imagined table) against the robot frames.
+    /// motion: progress and heading of the arm's tip, tracked from frame differences and
+    /// mapped onto the table plane (any clip); state: the episodes' state vectors (e.g.
+    /// end-effector position); translated: the human clip translated to the robot domain
+    /// (imagined table) against the robot frames.
     #[arg(long, default_value = "motion")]
     features: String,
     /// Band half-width as a fraction of the longer clip.
@@ -66,9 +67,10 @@ struct Common {
     /// Translation model for --features translated (default: the only one).
     #[arg(long)]
     model_id: Option<String>,
-    /// Pairs above this normalised cost per feature dimension are flagged untrusted.
-    #[arg(long, default_value_t = 0.5)]
-    max_cost: f64,
+    /// Pairs above this normalised cost per feature dimension are flagged untrusted
+    /// (default per feature kind: motion 0.002, state 0.002, translated 0.5).
+    #[arg(long)]
+    max_cost: Option<f64>,
 }
 
 #[derive(Subcommand, Debug)]

@@ -25,8 +25,9 @@ pub struct AlignOptions {
     /// Only these pairs.
     pub pairs: Option<BTreeSet<String>>,
     pub partition: Option<Partition>,
-    /// A pair is flagged untrusted above this normalised cost per feature dimension.
-    pub max_cost: f64,
+    /// A pair is flagged untrusted above this normalised cost per feature dimension
+    /// (default: [`FeatureKind::untrusted_cost`] of the feature kind).
+    pub max_cost: Option<f64>,
     /// Ground truth per pair (human frame → robot frame), e.g. milv-sim's warps.jsonl.
     pub truth: BTreeMap<String, Vec<usize>>,
 }
@@ -39,7 +40,7 @@ impl Default for AlignOptions {
             model_id: None,
             pairs: None,
             partition: None,
-            max_cost: 0.5,
+            max_cost: None,
             truth: BTreeMap::new(),
         }
     }
@@ -375,6 +376,7 @@ pub fn align_dataset(
             }),
         }
     }
+    let max_cost = opts.max_cost.unwrap_or_else(|| kind.untrusted_cost());
     let refs: Vec<(&Episode, &Episode)> = good.iter().map(|(_, h, r)| (*h, *r)).collect();
     let (hclips, rclips) = clips_for(ds, v, kind, model.as_deref(), &refs)?;
     type PairResult = std::result::Result<(PairSummary, Alignment), String>;
@@ -426,7 +428,7 @@ pub fn align_dataset(
                         cost_per_dim: per_dim,
                         path_length: al.path.len(),
                         band_edge_fraction: edge,
-                        trusted: per_dim <= opts.max_cost && edge <= 0.1,
+                        trusted: per_dim <= max_cost && edge <= 0.1,
                         mean_frame_error: mean_err,
                         max_frame_error: max_err,
                     },

@@ -29,6 +29,23 @@ impl Features {
         &self.data[i * self.d..(i + 1) * self.d]
     }
 
+    /// Each dimension mapped onto [0, 1] by its range over the clip (a constant dimension
+    /// becomes 0). A path's range does not depend on how fast it is travelled, while its
+    /// mean and spread do: two clips of one motion at different speeds keep equal values
+    /// for equal states.
+    pub fn range_normalized(mut self) -> Self {
+        for k in 0..self.d {
+            let col = || (0..self.n).map(|i| self.data[i * self.d + k]);
+            let lo = col().fold(f64::INFINITY, f64::min);
+            let span = col().fold(f64::NEG_INFINITY, f64::max) - lo;
+            for i in 0..self.n {
+                let v = &mut self.data[i * self.d + k];
+                *v = if span > 1e-12 { (*v - lo) / span } else { 0.0 };
+            }
+        }
+        self
+    }
+
     /// Each dimension shifted and scaled to mean 0, standard deviation 1 over the clip
     /// (a constant dimension becomes 0).
     pub fn z_normalized(mut self) -> Self {

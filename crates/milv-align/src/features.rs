@@ -8,8 +8,8 @@
 
 use milv_data::frame_codec::{self, FrameEncoding};
 
-use crate::Error;
 use crate::dtw::Features;
+use crate::{Error, motion};
 
 /// One clip as stored: encoded frames (from `frames`, or `imagined` for translated human
 /// clips) and, when the episode has them, per-frame state vectors.
@@ -66,6 +66,12 @@ pub trait FeatureKind: Sync {
 
     fn extract(&self, clip: &Clip) -> Result<Features, Error>;
 
+    /// Normalised DTW cost per feature dimension above which a pair is not trusted: just
+    /// above the worst true pair of milv-sim's paired clips for each kind.
+    fn untrusted_cost(&self) -> f64 {
+        0.5
+    }
+
     /// Adjusts the robot features to the human ones before alignment (e.g. resolving
     /// camera axis flips). Default: nothing.
     fn fit_pair(&self, _human: &Features, robot: Features) -> Features {
@@ -73,13 +79,18 @@ pub trait FeatureKind: Sync {
     }
 }
 
-/// End-effector / state columns, z-normalised per clip. Both episodes must carry states
-/// of the same width.
+/// End-effector / state columns, each scaled to [0, 1] by its range over the clip (see
+/// [`Features::range_normalized`]). Both episodes must carry states of the same width.
 pub struct State;
 
 impl FeatureKind for State {
     fn name(&self) -> &'static str {
         "state"
+    }
+
+    fn untrusted_cost(&self) -> f64 {
+        // True milv-sim pairs: ≤ 0.00054; pairs of different motions: mostly ≥ 0.006.
+        0.002
     }
 
     fn extract(&self, clip: &Clip) -> Result<Features, Error> {
@@ -97,171 +108,140 @@ impl FeatureKind for State {
             )));
         }
         let data = states.iter().flatten().map(|&v| f64::from(v)).collect();
-        Ok(Features::new(states.len(), d, data)?.z_normalized())
+        Ok(Features::new(states.len(), d, data)?.range_normalized())
     }
 }
 
-/// Luma of an RGB24 frame averaged over `f×f` blocks.
-fn block_luma(rgb: &[u8], w: usize, h: usize, f: usize) -> (Vec<f64>, usize, usize) {
-    let (sw, sh) = (w / f, h / f);
-    let mut out = vec![0.0; sw * sh];
-    for y in 0..sh * f {
-        for x in 0..sw * f {
-            let p = &rgb[(y * w + x) * 3..(y * w + x) * 3 + 3];
-            out[(y / f) * sw + x / f] +=
-                0.299 * f64::from(p[0]) + 0.587 * f64::from(p[1]) + 0.114 * f64::from(p[2]);
-        }
-    }
-    let norm = (f * f) as f64;
-    out.iter_mut().for_each(|v| *v /= norm);
-    (out, sw, sh)
-}
-
-/// Where the arm's tip is, from pixels alone, in a way that survives a change of
-/// embodiment and viewpoint:
-/// 1. frames are reduced to a coarse luma grid (about 21 cells on the short side, which
-///    keeps the arm and drops texture);
-/// 2. the background is the per-cell median over the clip (the arm moves, the table does
-///    not), and the foreground is what differs from it by more than 30 % of the frame's
-///    largest difference (at least 10 grey levels);
-/// 3. the arm enters the picture from the side whose border row holds the most
-///    foreground over the clip; its tip is the foreground row farthest from that side,
-///    and the feature is that row and the mean column on it (image-normalised);
-/// 4. a 3-frame moving average, then z-normalisation per clip.
+/// How far along its path the arm's tip is, and where it is heading, on the table plane:
+/// what stays the same when the arm, the camera and the speed change.
 ///
-/// The two cameras look from different sides, so [`FeatureKind::fit_pair`] picks the
-/// signed axis permutation of the robot's (column, row) that best matches the human's,
-/// both resampled to one length.
+/// 1. The tip is tracked from frame differences (see [`crate::motion`]): the moving
+///    pixels farthest from the border the arm enters from.
+/// 2. Its pixel position is mapped onto the table plane through the homography of the
+///    table's quad in the clip's median frame (image coordinates if there is none), which
+///    undoes the camera's perspective.
+/// 3. The track is cleaned (5-frame median, then Gaussian σ = 2.5 frames).
+/// 4. Features per frame: the path length travelled so far over the whole path's
+///    (0 → 1), and the unit heading of the motion (central difference over 4 frames)
+///    weighted by [`HEADING_WEIGHT`].
+///
+/// Progress is the main signal: unlike positions it carries no offset between embodiments
+/// (a hand's fingertips lead its palm by more than a gripper leads its wrist) and unlike
+/// z-normalised values it does not depend on where the clip dwells. The heading tells
+/// apart stretches of equal progress that go different ways. The two tables are the same
+/// square seen from different sides, so [`FeatureKind::fit_pair`] turns the robot's
+/// headings by the symmetry of the square that best matches the human's.
 pub struct Motion;
 
-const MOTION_D: usize = 2;
-const GRID_CELLS: usize = 21;
+/// Weight of the two heading columns against progress (measured on milv-sim pairs: more
+/// than ~0.2 lets heading noise pull the path off).
+pub const HEADING_WEIGHT: f64 = 0.1;
+const MOTION_D: usize = 3;
 
 impl FeatureKind for Motion {
     fn name(&self) -> &'static str {
         "motion"
     }
 
+    fn untrusted_cost(&self) -> f64 {
+        // True milv-sim pairs: ≤ 0.0018. Any two motions progress from 0 to 1, so only
+        // the heading tells a wrong pair apart: about half of them cost more than this.
+        0.002
+    }
+
     fn extract(&self, clip: &Clip) -> Result<Features, Error> {
         let n = clip.images.len();
-        let mut grids = Vec::with_capacity(n);
-        let mut size = None;
+        let mut tracker: Option<(motion::TipTracker, (usize, usize))> = None;
         for t in 0..n {
             let (rgb, w, h) = clip.rgb(t)?;
-            let f = (w.min(h) / GRID_CELLS).max(1);
-            let g = block_luma(&rgb, w, h, f);
-            if size.is_some_and(|s| s != (g.1, g.2)) {
+            let (tr, size) = tracker.get_or_insert_with(|| (motion::TipTracker::new(w, h, n), (w, h)));
+            if *size != (w, h) {
                 return Err(Error::Invalid(format!(
                     "episode {}: frame {t} changes size",
                     clip.episode_id
                 )));
             }
-            size = Some((g.1, g.2));
-            grids.push(g.0);
+            tr.push(rgb);
         }
-        let (sw, sh) = size.unwrap_or((0, 0));
-        let cells = sw * sh;
-        let mut bg = vec![0.0; cells];
-        let mut col = vec![0.0; n];
-        for (c, b) in bg.iter_mut().enumerate() {
-            for (t, g) in grids.iter().enumerate() {
-                col[t] = g[c];
-            }
-            col.sort_by(f64::total_cmp);
-            *b = col[n / 2];
-        }
-        let masks: Vec<Vec<bool>> = grids
-            .iter()
-            .map(|g| {
-                let d: Vec<f64> = g.iter().zip(&bg).map(|(a, b)| (a - b).abs()).collect();
-                let thr = d.iter().copied().fold(0.0, f64::max).mul_add(0.3, 0.0).max(10.0);
-                d.iter().map(|&v| v > thr).collect()
-            })
-            .collect();
-        // Entry side: 0 bottom, 1 top, 2 left, 3 right.
-        let mut border = [0usize; 4];
-        for m in &masks {
-            for x in 0..sw {
-                border[0] += usize::from(m[(sh - 1) * sw + x]);
-                border[1] += usize::from(m[x]);
-            }
-            for y in 0..sh {
-                border[2] += usize::from(m[y * sw]);
-                border[3] += usize::from(m[y * sw + sw - 1]);
-            }
-        }
-        // Ties (e.g. an arm that never touches the border) resolve to the bottom.
-        let side = (0..4).rev().max_by_key(|&s| border[s]).unwrap_or(0);
-        // View every grid with the entry side at the bottom: (u across, v up from entry).
-        let (uw, vh) = if side < 2 { (sw, sh) } else { (sh, sw) };
-        let at = |m: &[bool], u: usize, v: usize| -> bool {
-            let (x, y) = match side {
-                0 => (u, sh - 1 - v),
-                1 => (sw - 1 - u, v),
-                2 => (v, u),
-                _ => (sw - 1 - v, sh - 1 - u),
-            };
-            m[y * sw + x]
+        let Some((tracker, (w, h))) = tracker else {
+            return Err(Error::Invalid(format!(
+                "episode {} has no frames",
+                clip.episode_id
+            )));
         };
-        let mut data = Vec::with_capacity(n * MOTION_D);
-        for m in &masks {
-            let tip = (0..vh).rev().find(|&v| (0..uw).any(|u| at(m, u, v)));
-            let row = match tip {
-                Some(v) => {
-                    let us: Vec<usize> = (0..uw)
-                        .filter(|&u| at(m, u, v) || (v > 0 && at(m, u, v - 1)))
-                        .collect();
-                    let mean_u = us.iter().sum::<usize>() as f64 / us.len().max(1) as f64;
-                    [mean_u / uw as f64, v as f64 / vh as f64]
-                }
-                None => [0.5, 0.0],
-            };
-            data.extend_from_slice(&row);
-        }
-        let smoothed: Vec<f64> = (0..n)
-            .flat_map(|t| {
-                let (a, b) = (t.saturating_sub(1), (t + 1).min(n - 1));
-                let data = &data;
-                (0..MOTION_D).map(move |k| {
-                    (data[a * MOTION_D + k] + data[t * MOTION_D + k] + data[b * MOTION_D + k]) / 3.0
-                })
-            })
+        let track = tracker.finish().ok_or_else(|| {
+            Error::Invalid(format!(
+                "episode {}: nothing moves in the clip (motion features need a moving arm)",
+                clip.episode_id
+            ))
+        })?;
+        let plane = motion::table_quad(&track.background, w, h)
+            .and_then(|q| motion::to_unit_square(&q))
+            .unwrap_or_else(|| milv_geom::Homography::scale(1.0 / w as f64, 1.0 / h as f64));
+        let on_table: Vec<(f64, f64)> = track.tips.iter().map(|&p| plane.apply(p)).collect();
+        let clean = |c: fn(&(f64, f64)) -> f64| {
+            let v: Vec<f64> = on_table.iter().map(c).collect();
+            motion::gaussian_filter(&motion::median_filter(&v, 5), 2.5)
+        };
+        let (xs, ys) = (clean(|p| p.0), clean(|p| p.1));
+        let travelled: Vec<f64> = std::iter::once(0.0)
+            .chain((1..n).scan(0.0, |acc, t| {
+                *acc += (xs[t] - xs[t - 1]).hypot(ys[t] - ys[t - 1]);
+                Some(*acc)
+            }))
             .collect();
-        Ok(Features::new(n, MOTION_D, smoothed)?.z_normalized())
+        let total = travelled[n - 1];
+        let mut data = Vec::with_capacity(n * MOTION_D);
+        for (t, done) in travelled.iter().enumerate() {
+            let (a, b) = (t.saturating_sub(2), (t + 2).min(n - 1));
+            let (dx, dy) = (xs[b] - xs[a], ys[b] - ys[a]);
+            let len = dx.hypot(dy).max(1e-9);
+            let progress = if total > 1e-9 {
+                done / total
+            } else {
+                t as f64 / (n - 1).max(1) as f64
+            };
+            data.extend_from_slice(&[progress, HEADING_WEIGHT * dx / len, HEADING_WEIGHT * dy / len]);
+        }
+        Features::new(n, MOTION_D, data)
     }
 
     fn fit_pair(&self, human: &Features, robot: Features) -> Features {
-        // Candidate maps of (u, v): identity or swapped axes, each with the sign that
-        // correlates best.
-        let k = 64;
-        let resample = |f: &Features, c: usize| -> Vec<f64> {
-            (0..k)
-                .map(|s| {
-                    let i = ((s as f64 / (k - 1) as f64) * (f.n - 1) as f64).round() as usize;
-                    f.data[i * f.d + c]
+        // The 8 symmetries of the square, as maps of the heading (x, y).
+        const D4: [[f64; 4]; 8] = [
+            [1.0, 0.0, 0.0, 1.0],
+            [-1.0, 0.0, 0.0, 1.0],
+            [1.0, 0.0, 0.0, -1.0],
+            [-1.0, 0.0, 0.0, -1.0],
+            [0.0, 1.0, 1.0, 0.0],
+            [0.0, -1.0, 1.0, 0.0],
+            [0.0, 1.0, -1.0, 0.0],
+            [0.0, -1.0, -1.0, 0.0],
+        ];
+        let turn = |m: &[f64; 4], r: &[f64]| [m[0] * r[1] + m[1] * r[2], m[2] * r[1] + m[3] * r[2]];
+        // Compare the headings with the robot clip resampled to the human's length.
+        let mismatch = |m: &[f64; 4]| -> f64 {
+            (0..human.n)
+                .map(|i| {
+                    let j = if human.n > 1 {
+                        (i as f64 * (robot.n - 1) as f64 / (human.n - 1) as f64).round() as usize
+                    } else {
+                        0
+                    };
+                    let (hr, rr) = (human.row(i), turn(m, robot.row(j)));
+                    (hr[1] - rr[0]).powi(2) + (hr[2] - rr[1]).powi(2)
                 })
-                .collect()
+                .sum()
         };
-        let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
-        let (hx, hy) = (resample(human, 0), resample(human, 1));
-        let (rx, ry) = (resample(&robot, 0), resample(&robot, 1));
-        let sign = |c: f64| if c < 0.0 { -1.0 } else { 1.0 };
-        let mut best = (f64::NEG_INFINITY, false, 1.0, 1.0);
-        for swap in [false, true] {
-            let (ax, ay) = if swap { (&ry, &rx) } else { (&rx, &ry) };
-            let (cx, cy) = (dot(&hx, ax), dot(&hy, ay));
-            if cx.abs() + cy.abs() > best.0 {
-                best = (cx.abs() + cy.abs(), swap, sign(cx), sign(cy));
-            }
-        }
-        let (_, swap, sx, sy) = best;
+        let best = D4
+            .iter()
+            .min_by(|a, b| mismatch(a).total_cmp(&mismatch(b)))
+            .unwrap_or(&D4[0]);
         let mut out = robot;
         for r in out.data.chunks_exact_mut(MOTION_D) {
-            if swap {
-                r.swap(0, 1);
-            }
-            r[0] *= sx;
-            r[1] *= sy;
+            let [x, y] = turn(best, r);
+            r[1] = x;
+            r[2] = y;
         }
         out
     }
@@ -330,8 +310,8 @@ pub fn by_name(name: &str) -> Result<&'static dyn FeatureKind, Error> {
 mod tests {
     use super::*;
 
-    /// A dark "arm" entering from `side` (0 bottom, 1 top) whose tip reaches `reach[t]`
-    /// of the way across a 64×48 grey frame, at column `col[t]`.
+    /// A dark "arm" entering from `side` (0 bottom, 1 top: the view turned by 180°) whose
+    /// tip reaches `reach[t]` of the way across a 64×48 grey frame, at column `col[t]`.
     fn clip(side: u8, reach: &[f64], col: &[f64]) -> Clip {
         let (w, h) = (64usize, 48usize);
         let images = reach
@@ -341,6 +321,8 @@ mod tests {
                 let mut rgb = vec![200u8; w * h * 3];
                 let len = (r * h as f64) as usize;
                 let x0 = (c * (w - 8) as f64) as usize;
+                // Seen from the top, the picture is turned by 180°.
+                let x0 = if side == 0 { x0 } else { w - 8 - x0 };
                 for k in 0..len {
                     let y = if side == 0 { h - 1 - k } else { k };
                     for x in x0..x0 + 8 {
@@ -364,24 +346,48 @@ mod tests {
     }
 
     #[test]
-    fn motion_follows_the_tip_whichever_side_the_arm_enters_from() {
-        let reach: Vec<f64> = (0..20).map(|t| 0.2 + 0.6 * (t as f64 / 19.0)).collect();
-        let col: Vec<f64> = (0..20).map(|t| (t as f64 / 19.0 * 3.0).sin().abs()).collect();
+    fn motion_progress_and_heading_agree_across_mirrored_views() {
+        // The bar reaches in, then sweeps sideways: two legs, at an uneven pace.
+        let pace: Vec<f64> = (0..30).map(|t| (t as f64 / 29.0).powf(1.3)).collect();
+        let reach: Vec<f64> = pace.iter().map(|&p| 0.2 + 0.6 * (2.0 * p).min(1.0)).collect();
+        let col: Vec<f64> = pace
+            .iter()
+            .map(|&p| 0.1 + 0.8 * (2.0 * p - 1.0).max(0.0))
+            .collect();
         let from_bottom = Motion.extract(&clip(0, &reach, &col)).unwrap();
         let from_top = Motion.extract(&clip(1, &reach, &col)).unwrap();
-        // The "how far in" coordinate rises with reach in both clips.
         for f in [&from_bottom, &from_top] {
-            let v: Vec<f64> = (0..f.n).map(|i| f.row(i)[1]).collect();
-            assert!(v.windows(2).filter(|w| w[1] < w[0] - 1e-9).count() <= 2, "{v:?}");
-            assert!(v[19] > v[0]);
+            let p: Vec<f64> = (0..f.n).map(|i| f.row(i)[0]).collect();
+            assert!(p.windows(2).all(|w| w[1] >= w[0] - 1e-12), "{p:?}");
+            assert!(p[0].abs() < 1e-12 && (p[29] - 1.0).abs() < 1e-12);
         }
-        // Fitting the pair undoes the mirrored column axis of the top view.
+        // The same motion: equal progress frame by frame, whichever side it is seen from.
+        for i in 0..30 {
+            let (a, b) = (from_bottom.row(i)[0], from_top.row(i)[0]);
+            assert!((a - b).abs() < 0.05, "frame {i}: {a} vs {b}");
+        }
+        // The top view turns the motion by 180°; fitting the pair turns it back.
+        let heading_dot = |f: &Features| -> f64 {
+            (0..30)
+                .map(|i| {
+                    let (h, r) = (from_bottom.row(i), f.row(i));
+                    (h[1] * r[1] + h[2] * r[2]) / (HEADING_WEIGHT * HEADING_WEIGHT)
+                })
+                .sum::<f64>()
+                / 30.0
+        };
+        assert!(heading_dot(&from_top) < -0.8, "{}", heading_dot(&from_top));
         let fitted = Motion.fit_pair(&from_bottom, from_top);
-        let corr: f64 = (0..20)
-            .map(|i| fitted.row(i)[0] * from_bottom.row(i)[0])
-            .sum::<f64>()
-            / 20.0;
-        assert!(corr > 0.8, "{corr}");
+        assert!(heading_dot(&fitted) > 0.8, "{}", heading_dot(&fitted));
+        // A clip where nothing moves has no motion features.
+        let still = clip(0, &[0.5; 4], &[0.3; 4]);
+        assert!(
+            Motion
+                .extract(&still)
+                .unwrap_err()
+                .to_string()
+                .contains("nothing moves")
+        );
     }
 
     #[test]
@@ -398,7 +404,8 @@ mod tests {
         c.states = Some(vec![vec![1.0, 2.0], vec![3.0, 5.0]]);
         let f = State.extract(&c).unwrap();
         assert_eq!((f.n, f.d), (2, 2));
-        assert_eq!(f.row(0), [-1.0, -1.0]);
+        assert_eq!(f.row(0), [0.0, 0.0]);
+        assert_eq!(f.row(1), [1.0, 1.0]);
         assert!(by_name("pixels").is_err());
     }
 }

@@ -8,11 +8,13 @@
 //! |---|---|
 //! | [`dtw`] | banded DTW (Sakoe–Chiba, O(n·band) memory), step patterns, [`Features`] |
 //! | [`features`] | the [`FeatureKind`] trait and its kinds: `motion`, `state`, `translated` |
+//! | [`motion`] | tip tracking from frame differences, table-plane rectification, track filters |
 //! | [`align`] | [`align_dataset`]: every pair of a dataset version, in parallel, into the `alignments` table; per-pair summaries and ground-truth errors |
 
 pub mod align;
 pub mod dtw;
 pub mod features;
+pub mod motion;
 
 pub use align::{AlignOptions, AlignReport, PairSummary, align_dataset, load_pair};
 pub use dtw::{Alignment, Band, Features, StepPattern, dtw, row_to_col};

@@ -9,6 +9,8 @@
 use serde::{Deserialize, Serialize};
 use tiny_skia::{Color, FillRule, LineCap, LineJoin, Paint, PathBuilder, Pixmap, Stroke, Transform};
 
+use milv_geom::Homography;
+
 use crate::geom::{Vec2, WORKSPACE_CM};
 
 /// Which embodiment (and camera) a frame shows.
@@ -31,7 +33,7 @@ impl Domain {
 /// A table-plane → pixel homography.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
-    h: [[f64; 3]; 3],
+    h: Homography,
 }
 
 impl Camera {
@@ -39,15 +41,8 @@ impl Camera {
     pub fn from_corners(quad: [(f64, f64); 4]) -> Option<Camera> {
         let w = f64::from(WORKSPACE_CM);
         let src = [(0.0, 0.0), (w, 0.0), (w, w), (0.0, w)];
-        // Direct linear transform with h33 = 1: eight equations, eight unknowns.
-        let mut a = [[0.0f64; 9]; 8];
-        for (i, ((x, y), (u, v))) in src.iter().zip(quad.iter()).enumerate() {
-            a[2 * i] = [*x, *y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y, *u];
-            a[2 * i + 1] = [0.0, 0.0, 0.0, *x, *y, 1.0, -v * x, -v * y, *v];
-        }
-        let s = solve8(a)?;
         Some(Camera {
-            h: [[s[0], s[1], s[2]], [s[3], s[4], s[5]], [s[6], s[7], 1.0]],
+            h: Homography::from_points(&src, &quad)?,
         })
     }
 
@@ -64,17 +59,15 @@ impl Camera {
         // These quads are convex and non-degenerate, so the solve cannot fail; fall back
         // to an affine fit of the square rather than panicking anyway.
         Camera::from_corners(quad).unwrap_or(Camera {
-            h: [[k * 2.0, 0.0, 4.0], [0.0, k * 2.0, 4.0], [0.0, 0.0, 1.0]],
+            h: Homography {
+                h: [[k * 2.0, 0.0, 4.0], [0.0, k * 2.0, 4.0], [0.0, 0.0, 1.0]],
+            },
         })
     }
 
     /// Projects a table point to pixel coordinates.
     pub fn project(&self, p: Vec2) -> (f32, f32) {
-        let (x, y) = (f64::from(p.x), f64::from(p.y));
-        let h = &self.h;
-        let w = h[2][0] * x + h[2][1] * y + h[2][2];
-        let u = (h[0][0] * x + h[0][1] * y + h[0][2]) / w;
-        let v = (h[1][0] * x + h[1][1] * y + h[1][2]) / w;
+        let (u, v) = self.h.apply((f64::from(p.x), f64::from(p.y)));
         (u as f32, v as f32)
     }
 
@@ -84,27 +77,6 @@ impl Camera {
         let (c, d) = (self.project(p), self.project(p + Vec2::new(0.0, 1.0)));
         (((b.0 - a.0).hypot(b.1 - a.1)) + ((d.0 - c.0).hypot(d.1 - c.1))) * 0.5
     }
-}
-
-/// Gaussian elimination with partial pivoting on an 8×9 augmented matrix.
-fn solve8(mut a: [[f64; 9]; 8]) -> Option<[f64; 8]> {
-    for col in 0..8 {
-        let piv = (col..8).max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))?;
-        if a[piv][col].abs() < 1e-12 {
-            return None;
-        }
-        a.swap(col, piv);
-        let pivot_row = a[col];
-        for (row, r) in a.iter_mut().enumerate() {
-            if row != col {
-                let f = r[col] / pivot_row[col];
-                for (x, p) in r.iter_mut().zip(pivot_row.iter()).skip(col) {
-                    *x -= f * p;
-                }
-            }
-        }
-    }
-    Some(std::array::from_fn(|i| a[i][8] / a[i][i]))
 }
 
 /// Colours and materials of one domain's look.

@@ -1,0 +1,432 @@
+//! The pieces of the `motion` feature: where the arm's tip is in each frame, from frame
+//! differences, and where that is on the table plane.
+//!
+//! Both arms enter the picture from one side and their tip is the part of the moving
+//! region farthest from it. Differencing frames `t−1` and `t+1` finds what moves without a
+//! background model, so objects that were pushed leave no "ghost" behind and a sleeve
+//! that covers the same cells for most of the clip is not mistaken for the table. The
+//! tip's pixel position is then mapped onto the table plane through the homography of
+//! the table's image quad (detected in the clip's median frame), which undoes each
+//! camera's perspective: both clips then move in one square, up to its 8 symmetries.
+
+use milv_geom::Homography;
+
+/// RGB distance (0–441) below which a pixel counts as still; raised for noisy clips.
+const MIN_MOTION: f32 = 12.0;
+/// The tip region: moving pixels within this many pixels (at 128 px) of the farthest one.
+const TIP_BAND_128: f64 = 8.0;
+/// At most this many frames go into the median frame the table is found in.
+const BACKGROUND_SAMPLES: usize = 32;
+
+/// Which image border the arm enters from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Side {
+    Bottom,
+    Top,
+    Left,
+    Right,
+}
+
+const SIDES: [Side; 4] = [Side::Bottom, Side::Top, Side::Left, Side::Right];
+
+impl Side {
+    /// Distance of pixel (x, y) from this border.
+    fn depth(self, x: usize, y: usize, w: usize, h: usize) -> usize {
+        match self {
+            Side::Bottom => h - 1 - y,
+            Side::Top => y,
+            Side::Left => x,
+            Side::Right => w - 1 - x,
+        }
+    }
+}
+
+/// What one frame's moving pixels say: for each possible entry side, the tip (pixel
+/// centre, x right, y down), and how many moving pixels lie on that border.
+#[derive(Clone, Debug, Default)]
+struct FrameMotion {
+    tips: [Option<(f64, f64)>; 4],
+    border: [usize; 4],
+}
+
+/// `|frame_b − frame_a|` per pixel (RGB distance), box-blurred over 3×3 so a single
+/// noisy pixel does not count as motion.
+fn motion_map(a: &[u8], b: &[u8], w: usize, h: usize) -> Vec<f32> {
+    let d: Vec<f32> = a
+        .chunks_exact(3)
+        .zip(b.chunks_exact(3))
+        .map(|(p, q)| {
+            let s: f32 = (0..3).map(|c| (f32::from(p[c]) - f32::from(q[c])).powi(2)).sum();
+            s.sqrt()
+        })
+        .collect();
+    box3(&d, w, h)
+}
+
+/// 3×3 mean filter, edges clamped.
+fn box3(v: &[f32], w: usize, h: usize) -> Vec<f32> {
+    let mut rows = vec![0.0f32; v.len()];
+    for y in 0..h {
+        for x in 0..w {
+            let (l, r) = (x.saturating_sub(1), (x + 1).min(w - 1));
+            rows[y * w + x] = (v[y * w + l] + v[y * w + x] + v[y * w + r]) / 3.0;
+        }
+    }
+    let mut out = vec![0.0f32; v.len()];
+    for y in 0..h {
+        let (u, d) = (y.saturating_sub(1), (y + 1).min(h - 1));
+        for x in 0..w {
+            out[y * w + x] = (rows[u * w + x] + rows[y * w + x] + rows[d * w + x]) / 3.0;
+        }
+    }
+    out
+}
+
+/// The moving pixels of one motion map and their tip for every entry side.
+fn frame_motion(d: &[f32], w: usize, h: usize) -> FrameMotion {
+    // Noise floor: a robust scale of the map (most pixels are still), never below
+    // MIN_MOTION, so clean synthetic clips and noisy camera clips both work.
+    let mut sorted = d.to_vec();
+    let mid = sorted.len() / 2;
+    let median = *sorted.select_nth_unstable_by(mid, f32::total_cmp).1;
+    let thr = MIN_MOTION.max(5.0 * 1.4826 * median);
+    let moving: Vec<(usize, usize)> = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .filter(|&(x, y)| d[y * w + x] > thr)
+        .collect();
+    let mut fm = FrameMotion::default();
+    for (s, side) in SIDES.iter().enumerate() {
+        fm.border[s] = moving
+            .iter()
+            .filter(|&&(x, y)| side.depth(x, y, w, h) == 0)
+            .count();
+    }
+    if moving.len() < 3 {
+        return fm;
+    }
+    let band = (TIP_BAND_128 * w.min(h) as f64 / 128.0).round().max(2.0) as usize;
+    for (s, side) in SIDES.iter().enumerate() {
+        let far = moving
+            .iter()
+            .map(|&(x, y)| side.depth(x, y, w, h))
+            .max()
+            .unwrap_or(0);
+        let (mut sx, mut sy, mut k) = (0.0, 0.0, 0.0);
+        for &(x, y) in &moving {
+            if side.depth(x, y, w, h) + band >= far {
+                sx += x as f64 + 0.5;
+                sy += y as f64 + 0.5;
+                k += 1.0;
+            }
+        }
+        fm.tips[s] = Some((sx / k, sy / k));
+    }
+    fm
+}
+
+/// What [`TipTracker::finish`] found in a clip.
+pub struct Track {
+    /// The border the arm enters from.
+    pub side: Side,
+    /// One tip (pixels) per frame; frames without motion hold the nearest earlier tip.
+    pub tips: Vec<(f64, f64)>,
+    /// Median luma frame (of at most 32 frames spread over the clip).
+    pub background: Vec<u8>,
+}
+
+/// Tip positions (pixels) of a clip, one per frame, from frames decoded in order.
+pub struct TipTracker {
+    w: usize,
+    h: usize,
+    n: usize,
+    frames: Vec<FrameMotion>,
+    /// Frames t−1 and t of the sliding window (the map of t needs t+1).
+    window: Vec<Vec<u8>>,
+    background: Vec<Vec<u8>>,
+    sample_every: usize,
+    seen: usize,
+}
+
+impl TipTracker {
+    /// A tracker for a clip of `n ≥ 2` frames of `w`×`h`.
+    pub fn new(w: usize, h: usize, n: usize) -> Self {
+        TipTracker {
+            w,
+            h,
+            n,
+            frames: Vec::with_capacity(n),
+            window: Vec::new(),
+            background: Vec::new(),
+            sample_every: n.div_ceil(BACKGROUND_SAMPLES).max(1),
+            seen: 0,
+        }
+    }
+
+    /// Feeds the next frame (RGB24, `w`×`h`).
+    pub fn push(&mut self, rgb: Vec<u8>) {
+        if self.seen.is_multiple_of(self.sample_every) {
+            self.background.push(rgb.chunks_exact(3).map(luma).collect());
+        }
+        self.seen += 1;
+        // The map of frame t compares t−1 and t+1 (clamped at the ends).
+        if self.window.len() == 2 {
+            let d = motion_map(&self.window[0], &rgb, self.w, self.h);
+            self.frames.push(frame_motion(&d, self.w, self.h));
+            self.window.remove(0);
+        } else if self.window.len() == 1 {
+            let d = motion_map(&self.window[0], &rgb, self.w, self.h);
+            self.frames.push(frame_motion(&d, self.w, self.h));
+        }
+        self.window.push(rgb);
+        if self.seen == self.n && self.window.len() == 2 {
+            let d = motion_map(&self.window[0], &self.window[1], self.w, self.h);
+            self.frames.push(frame_motion(&d, self.w, self.h));
+        }
+    }
+
+    /// The clip's track; `None` when nothing moves in it.
+    pub fn finish(self) -> Option<Track> {
+        let totals: [usize; 4] = std::array::from_fn(|s| self.frames.iter().map(|f| f.border[s]).sum());
+        // Ties (e.g. an arm that never touches the border) resolve to the bottom.
+        let s = (0..4).rev().max_by_key(|&s| totals[s]).unwrap_or(0);
+        let raw: Vec<Option<(f64, f64)>> = self.frames.iter().map(|f| f.tips[s]).collect();
+        let first = raw.iter().flatten().next().copied()?;
+        let mut last = first;
+        let tips = raw
+            .iter()
+            .map(|t| {
+                if let Some(t) = t {
+                    last = *t;
+                }
+                last
+            })
+            .collect();
+        Some(Track {
+            side: SIDES[s],
+            tips,
+            background: median_frame(&self.background),
+        })
+    }
+}
+
+fn luma(p: &[u8]) -> u8 {
+    (0.299 * f64::from(p[0]) + 0.587 * f64::from(p[1]) + 0.114 * f64::from(p[2])).round() as u8
+}
+
+/// Per-pixel median of equally sized luma frames.
+fn median_frame(frames: &[Vec<u8>]) -> Vec<u8> {
+    let len = frames.first().map_or(0, Vec::len);
+    let mut col = Vec::with_capacity(frames.len());
+    (0..len)
+        .map(|i| {
+            col.clear();
+            col.extend(frames.iter().map(|f| f[i]));
+            col.sort_unstable();
+            col[col.len() / 2]
+        })
+        .collect()
+}
+
+/// Otsu's threshold of a luma image: the level that best separates two classes, if
+/// their means differ by at least 20 grey levels (a picture with no bright table has none).
+fn otsu(img: &[u8]) -> Option<u8> {
+    let mut hist = [0u64; 256];
+    img.iter().for_each(|&v| hist[v as usize] += 1);
+    let total = img.len() as f64;
+    let sum_all: f64 = hist.iter().enumerate().map(|(v, &c)| v as f64 * c as f64).sum();
+    let (mut w0, mut sum0, mut best, mut level) = (0.0, 0.0, -1.0, None);
+    for (v, &c) in hist.iter().enumerate() {
+        w0 += c as f64;
+        sum0 += v as f64 * c as f64;
+        let w1 = total - w0;
+        if w0 == 0.0 || w1 == 0.0 {
+            continue;
+        }
+        let (m0, m1) = (sum0 / w0, (sum_all - sum0) / w1);
+        let between = w0 * w1 * (m0 - m1) * (m0 - m1);
+        if between > best {
+            best = between;
+            level = ((m1 - m0) >= 20.0).then_some(v as u8);
+        }
+    }
+    level
+}
+
+/// The largest 4-connected region of `mask` (indices into it).
+fn largest_region(mask: &[bool], w: usize, h: usize) -> Vec<usize> {
+    let mut seen = vec![false; mask.len()];
+    let mut best = Vec::new();
+    let mut stack = Vec::new();
+    for start in 0..mask.len() {
+        if !mask[start] || seen[start] {
+            continue;
+        }
+        let mut region = Vec::new();
+        seen[start] = true;
+        stack.push(start);
+        while let Some(i) = stack.pop() {
+            region.push(i);
+            let (x, y) = (i % w, i / w);
+            let mut visit = |j: usize| {
+                if mask[j] && !seen[j] {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            };
+            if x > 0 {
+                visit(i - 1);
+            }
+            if x + 1 < w {
+                visit(i + 1);
+            }
+            if y > 0 {
+                visit(i - w);
+            }
+            if y + 1 < h {
+                visit(i + w);
+            }
+        }
+        if region.len() > best.len() {
+            best = region;
+        }
+    }
+    best
+}
+
+/// The table's corners in a (median) luma frame: the largest bright region's extreme
+/// points along the two diagonals, in image order top-left, top-right, bottom-right,
+/// bottom-left. `None` when no plausible table quad is found (too small, or the region
+/// is not quad-shaped), and the caller falls back to image coordinates.
+pub fn table_quad(luma: &[u8], w: usize, h: usize) -> Option<[(f64, f64); 4]> {
+    let thr = otsu(luma)?;
+    let mask: Vec<bool> = luma.iter().map(|&v| v > thr).collect();
+    let region = largest_region(&mask, w, h);
+    if region.len() * 10 < w * h {
+        return None;
+    }
+    let pt = |i: usize| ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+    let extreme = |f: &dyn Fn((f64, f64)) -> f64| {
+        region
+            .iter()
+            .map(|&i| pt(i))
+            .max_by(|a, b| f(*a).total_cmp(&f(*b)))
+            .unwrap_or((0.0, 0.0))
+    };
+    let quad = [
+        extreme(&|(x, y)| -x - y),
+        extreme(&|(x, y)| x - y),
+        extreme(&|(x, y)| x + y),
+        extreme(&|(x, y)| y - x),
+    ];
+    // Shoelace area: a table seen in perspective fills most of its corners' quad.
+    let area = (0..4)
+        .map(|k| {
+            let (a, b) = (quad[k], quad[(k + 1) % 4]);
+            a.0 * b.1 - b.0 * a.1
+        })
+        .sum::<f64>()
+        / 2.0;
+    (area > 0.0 && (region.len() as f64) > 0.7 * area && (region.len() as f64) < 1.2 * area).then_some(quad)
+}
+
+/// The map taking `quad` (image order) to the unit square's (0,0), (1,0), (1,1), (0,1).
+pub fn to_unit_square(quad: &[(f64, f64); 4]) -> Option<Homography> {
+    Homography::from_points(quad, &[(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)])
+}
+
+/// Median over a `k`-frame window (edges repeat the end values), per coordinate.
+pub fn median_filter(v: &[f64], k: usize) -> Vec<f64> {
+    let r = k / 2;
+    let n = v.len();
+    let mut win = Vec::with_capacity(k);
+    (0..n)
+        .map(|i| {
+            win.clear();
+            win.extend((0..k).map(|o| v[(i + o).saturating_sub(r).min(n - 1)]));
+            win.sort_by(f64::total_cmp);
+            win[r]
+        })
+        .collect()
+}
+
+/// Gaussian smoothing with standard deviation `sigma` frames (kernel cut at 4σ, edges
+/// repeat the end values).
+pub fn gaussian_filter(v: &[f64], sigma: f64) -> Vec<f64> {
+    let r = (4.0 * sigma).round() as isize;
+    let kernel: Vec<f64> = (-r..=r)
+        .map(|o| (-(o * o) as f64 / (2.0 * sigma * sigma)).exp())
+        .collect();
+    let norm: f64 = kernel.iter().sum();
+    let n = v.len() as isize;
+    (0..n)
+        .map(|i| {
+            (-r..=r)
+                .zip(&kernel)
+                .map(|(o, k)| k * v[(i + o).clamp(0, n - 1) as usize])
+                .sum::<f64>()
+                / norm
+        })
+        .collect()
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_tilted_bright_quad_is_found_and_mapped_to_the_unit_square() {
+        let (w, h) = (96usize, 80usize);
+        let corners = [(20.0, 10.0), (80.0, 16.0), (90.0, 70.0), (6.0, 64.0)];
+        // Inside test by the sign of the cross product along each (clockwise in image) edge.
+        let inside = |x: f64, y: f64| {
+            (0..4).all(|k| {
+                let (a, b) = (corners[k], corners[(k + 1) % 4]);
+                (b.0 - a.0) * (y - a.1) - (b.1 - a.1) * (x - a.0) >= 0.0
+            })
+        };
+        let luma: Vec<u8> = (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f64 + 0.5, (i / w) as f64 + 0.5);
+                if inside(x, y) { 180 } else { 40 }
+            })
+            .collect();
+        let quad = table_quad(&luma, w, h).unwrap();
+        for (got, want) in quad.iter().zip(&corners) {
+            assert!(
+                (got.0 - want.0).abs() < 2.0 && (got.1 - want.1).abs() < 2.0,
+                "{quad:?}"
+            );
+        }
+        let hmg = to_unit_square(&corners).unwrap();
+        for (c, want) in corners
+            .iter()
+            .zip([(0.0, 0.0), (1.0, 0.0), (1.0, 1.0), (0.0, 1.0)])
+        {
+            let (u, v) = hmg.apply(*c);
+            assert!((u - want.0).abs() < 1e-9 && (v - want.1).abs() < 1e-9);
+        }
+        // A dark frame with no table: no quad.
+        assert!(table_quad(&vec![30u8; w * h], w, h).is_none());
+    }
+
+    #[test]
+    fn filters_keep_constants_and_remove_spikes() {
+        let mut v = vec![2.0; 11];
+        assert_eq!(gaussian_filter(&v, 2.5), v);
+        v[5] = 50.0;
+        assert_eq!(median_filter(&v, 5), vec![2.0; 11]);
+        let ramp: Vec<f64> = (0..20).map(f64::from).collect();
+        let g = gaussian_filter(&ramp, 1.0);
+        assert!((g[10] - 10.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn still_clips_have_no_tip() {
+        let mut t = TipTracker::new(16, 16, 3);
+        for _ in 0..3 {
+            t.push(vec![100u8; 16 * 16 * 3]);
+        }
+        assert!(t.finish().is_none());
+    }
+}
