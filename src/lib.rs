@@ -14,7 +14,8 @@
 //! | [`score`] (`milv-score`) | β_qua over a dataset: the `scores` table, curation, reports |
 //! | [`sim`] (`milv-sim`) | the two-embodiment tabletop: tasks, experts, renderer, evaluation |
 //!
-//! [`cli`] holds what the binaries share (progress bars, exit codes).
+//! [`cli`] (`milv-cli`) holds what the binaries share (progress bars, exit codes), also
+//! used by `milv-train`, which links libtorch and so lives in its own package.
 
 pub use milv_align as align;
 pub use milv_data as data;
@@ -25,4 +26,4 @@ pub use milv_score as score;
 pub use milv_sim as sim;
 pub use milv_video as video;
 
-pub mod cli;
+pub use milv_cli as cli;

@@ -34,7 +34,16 @@ want=$(sha256sum tools/requirements*.txt | sha256sum | cut -d' ' -f1)
 if [ "$(cat "$stamp" 2>/dev/null)" != "$want" ]; then
   log "pip install -r tools/requirements.txt"
   "$VENV/bin/pip" install -q --disable-pip-version-check -r tools/requirements.txt
+  # libtorch for milv-train (tch): the PyPI wheel without its 3.5 GB of CUDA libraries.
+  log "pip install --no-deps -r tools/requirements-torch.txt"
+  "$VENV/bin/pip" install -q --disable-pip-version-check --no-deps -r tools/requirements-torch.txt
   echo "$want" > "$stamp"
+fi
+
+# tch builds against that libtorch: .cargo/config.toml points LIBTORCH at it.
+if [ ! -f "$VENV/lib/python3.11/site-packages/torch/lib/libtorch_cpu.so" ]; then
+  echo "setup: libtorch missing from $VENV (python3.11 and tools/requirements-torch.txt expected)" >&2
+  exit 1
 fi
 
 # Rust: the one toolchain on the machine; Cargo.lock pins every crate.

@@ -53,7 +53,7 @@ pub use dataset::{Dataset, DatasetRef, TableFile, Transaction};
 pub use error::{Error, Result};
 pub use log::{CommitMeta, FileAdd, InputDigest, TableChange, VersionEntry, run_id};
 pub use partition::Partition;
-pub use rows::{Episode, FrameRows, episodes_from_batches, episodes_to_batch};
+pub use rows::{Episode, FrameRows, ImaginedRow, ImaginedRows, episodes_from_batches, episodes_to_batch};
 pub use schema::{ColType, Column, SCHEMA_VERSION, TableKind};
 pub use shard::{ClosedShard, ShardOptions, ShardWriter};
 

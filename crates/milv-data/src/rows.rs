@@ -267,6 +267,114 @@ impl FrameRows {
     }
 }
 
+/// One translated frame for [`ImaginedRows::push`].
+pub struct ImaginedRow<'a> {
+    pub episode_id: &'a str,
+    pub frame_index: i32,
+    pub timestamp_ns: i64,
+    pub model_id: &'a str,
+    /// PNG of the imagined robot frame.
+    pub image: &'a [u8],
+    /// Raw little-endian latent values, their dtype (`f16` | `f32`) and shape.
+    pub latent: Option<(&'a [u8], &'a str, &'a [i32])>,
+    pub action: Option<&'a [f32]>,
+}
+
+/// Accumulates `imagined` rows and emits them as batches.
+pub struct ImaginedRows {
+    episode_id: StringBuilder,
+    frame_index: Int32Builder,
+    timestamp_ns: Int64Builder,
+    model_id: StringBuilder,
+    image: BinaryBuilder,
+    latent: BinaryBuilder,
+    latent_dtype: StringBuilder,
+    latent_shape: ListBuilder<Int32Builder>,
+    action: ListBuilder<Float32Builder>,
+    rows: usize,
+}
+
+impl Default for ImaginedRows {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ImaginedRows {
+    pub fn new() -> Self {
+        ImaginedRows {
+            episode_id: StringBuilder::new(),
+            frame_index: Int32Builder::new(),
+            timestamp_ns: Int64Builder::new(),
+            model_id: StringBuilder::new(),
+            image: BinaryBuilder::new(),
+            latent: BinaryBuilder::new(),
+            latent_dtype: StringBuilder::new(),
+            latent_shape: ListBuilder::new(Int32Builder::new()).with_field(Arc::new(Field::new(
+                "element",
+                DataType::Int32,
+                false,
+            ))),
+            action: f32_list(),
+            rows: 0,
+        }
+    }
+
+    pub fn push(&mut self, r: &ImaginedRow<'_>) {
+        self.episode_id.append_value(r.episode_id);
+        self.frame_index.append_value(r.frame_index);
+        self.timestamp_ns.append_value(r.timestamp_ns);
+        self.model_id.append_value(r.model_id);
+        self.image.append_value(r.image);
+        match r.latent {
+            Some((bytes, dtype, shape)) => {
+                self.latent.append_value(bytes);
+                self.latent_dtype.append_value(dtype);
+                self.latent_shape.values().append_slice(shape);
+                self.latent_shape.append(true);
+            }
+            None => {
+                self.latent.append_null();
+                self.latent_dtype.append_null();
+                self.latent_shape.append(false);
+            }
+        }
+        match r.action {
+            Some(a) => {
+                self.action.values().append_slice(a);
+                self.action.append(true);
+            }
+            None => self.action.append(false),
+        }
+        self.rows += 1;
+    }
+
+    pub fn len(&self) -> usize {
+        self.rows
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.rows == 0
+    }
+
+    /// Emits the buffered rows and starts over.
+    pub fn finish(&mut self) -> Result<RecordBatch> {
+        let columns: Vec<ArrayRef> = vec![
+            Arc::new(self.episode_id.finish()),
+            Arc::new(self.frame_index.finish()),
+            Arc::new(self.timestamp_ns.finish()),
+            Arc::new(self.model_id.finish()),
+            Arc::new(self.image.finish()),
+            Arc::new(self.latent.finish()),
+            Arc::new(self.latent_dtype.finish()),
+            Arc::new(self.latent_shape.finish()),
+            Arc::new(self.action.finish()),
+        ];
+        self.rows = 0;
+        Ok(RecordBatch::try_new(TableKind::Imagined.arrow_schema(), columns)?)
+    }
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {

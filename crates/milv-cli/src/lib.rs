@@ -1,4 +1,4 @@
-//! What the command-line tools share: exit codes, progress bars, output helpers.
+//! # milv-cli — what the command-line tools share: exit codes, progress bars, output helpers
 
 use indicatif::{ProgressBar, ProgressStyle};
 

@@ -1,0 +1,210 @@
+//! How good a translation model is, on data it did not train on:
+//! - SSIM (grey, `shared/spec/quality.md`) of G(x^h) against the ground-truth robot
+//!   rendering of the same human frame (milv-sim's `ground_truth.jsonl` pairs each human
+//!   demo with the robot demo of the same states, frame by frame);
+//! - π_I's action error on held-out robot random videos (`split ≠ train`), next to the
+//!   error of always predicting no motion, so the number has a scale.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use milv_data::{Dataset, Episode, ops};
+use milv_quality::{Rgb, SsimMode, ssim};
+use serde::Serialize;
+use tch::nn::Module;
+use tch::{Kind, Tensor};
+
+use crate::config::ModelConfig;
+use crate::cyclegan::Nets;
+use crate::data::{Clip, load_clips, to_chw};
+use crate::train::to_rgb;
+use crate::{Error, Result};
+
+/// Frames translated per forward pass.
+const CHUNK: usize = 8;
+
+pub struct EvalSet {
+    /// (human demo, its ground-truth robot rendering).
+    pub pairs: Vec<(Clip, Clip)>,
+    /// Robot random videos with actions, held out of training.
+    pub held_out: Vec<Clip>,
+}
+
+fn file_name(uri: &str) -> &str {
+    uri.rsplit(['/', '\\']).next().unwrap_or(uri)
+}
+
+impl EvalSet {
+    /// `truth`: JSON lines `{"human": FILE, "robot": FILE}` naming source videos (matched
+    /// by file name against the episodes' `source_uri`). At most `max_pairs` pairs.
+    pub fn load(ds: &Dataset, v: u64, truth: Option<&Path>, max_pairs: usize) -> Result<EvalSet> {
+        let eps = ops::episodes(ds, v)?;
+        let by_uri: BTreeMap<&str, &Episode> = eps.iter().map(|e| (e.source_uri.as_str(), e)).collect();
+        let mut by_file: BTreeMap<&str, Vec<&Episode>> = BTreeMap::new();
+        for e in &eps {
+            by_file.entry(file_name(&e.source_uri)).or_default().push(e);
+        }
+        // A truth entry names a file relative to the truth file's folder (as milv-sim
+        // writes it); the bare file name is enough when only one episode has it.
+        let find = |base: &Path, f: &str| -> Option<&Episode> {
+            let full = base.join(f);
+            let canon = std::fs::canonicalize(&full).unwrap_or_else(|_| full.clone());
+            let uri = |p: &Path| by_uri.get(p.to_string_lossy().as_ref()).copied();
+            uri(&full).or_else(|| uri(&canon)).or_else(|| match by_file.get(file_name(f)) {
+                Some(v) if v.len() == 1 => Some(v[0]),
+                _ => None,
+            })
+        };
+        let mut wanted_pairs: Vec<(String, String)> = Vec::new();
+        if let Some(path) = truth {
+            let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+            for (k, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+                let j: serde_json::Value = serde_json::from_str(line)
+                    .map_err(|e| Error::Data(format!("{}:{}: {e}", path.display(), k + 1)))?;
+                let (Some(h), Some(r)) = (j["human"].as_str(), j["robot"].as_str()) else {
+                    return Err(Error::Data(format!(
+                        "{}:{}: expected {{\"human\": FILE, \"robot\": FILE}}",
+                        path.display(),
+                        k + 1
+                    )));
+                };
+                let base = path.parent().unwrap_or(Path::new("."));
+                if let (Some(he), Some(re)) = (find(base, h), find(base, r)) {
+                    wanted_pairs.push((he.episode_id.clone(), re.episode_id.clone()));
+                }
+            }
+            // Held-out tasks first: they say most about generalisation.
+            wanted_pairs.sort_by_key(|(h, _)| eps.iter().any(|e| &e.episode_id == h && e.split == "train"));
+            wanted_pairs.truncate(max_pairs);
+        }
+        let pick = |ids: &[&String]| -> BTreeMap<String, Episode> {
+            eps.iter()
+                .filter(|e| ids.contains(&&e.episode_id))
+                .map(|e| (e.episode_id.clone(), e.clone()))
+                .collect()
+        };
+        let ids: Vec<&String> = wanted_pairs.iter().flat_map(|(h, r)| [h, r]).collect();
+        let mut clips = load_clips(ds, v, &pick(&ids), false)?;
+        let pairs = wanted_pairs
+            .iter()
+            .filter_map(|(h, r)| Some((clips.remove(h)?, clips.get(r)?.clone())))
+            .collect();
+        let held: BTreeMap<String, Episode> = eps
+            .iter()
+            .filter(|e| {
+                e.domain == "robot"
+                    && e.kind == "random"
+                    && e.split != "train"
+                    && e.action_dim.unwrap_or(0) > 0
+            })
+            .map(|e| (e.episode_id.clone(), e.clone()))
+            .collect();
+        let held_out = load_clips(ds, v, &held, true)?
+            .into_values()
+            .filter(|c| c.frames.len() >= 2)
+            .collect();
+        Ok(EvalSet { pairs, held_out })
+    }
+}
+
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct EvalReport {
+    pub step: u64,
+    /// Mean SSIM(G(x^h), ground truth) over all compared frames.
+    pub ssim: Option<f64>,
+    /// The same for the human frames themselves (the untranslated baseline).
+    pub ssim_untranslated: Option<f64>,
+    pub ssim_frames: usize,
+    pub ssim_episodes: usize,
+    /// Mean absolute error of π_I's actions (per component, action units).
+    pub action_mae: Option<f64>,
+    pub action_rmse: Option<f64>,
+    /// Mean absolute action (the error of always predicting 0).
+    pub action_mae_zero: Option<f64>,
+    pub action_frames: usize,
+}
+
+/// Evaluates `nets` on `set` (no gradients).
+pub fn evaluate(nets: &Nets, set: &EvalSet, cfg: &ModelConfig) -> Result<EvalReport> {
+    let size = cfg.image_size as u32;
+    let dev = nets.vs_g.device();
+    let batch = |c: &Clip, range: std::ops::Range<usize>| -> Result<Tensor> {
+        let mut data = Vec::new();
+        for t in range.clone() {
+            data.extend(c.tensor_data(t, size)?);
+        }
+        Ok(Tensor::from_slice(&data)
+            .view([range.len() as i64, 3, cfg.image_size, cfg.image_size])
+            .to_device(dev))
+    };
+    let mut rep = EvalReport::default();
+    let (mut sum, mut sum_raw) = (0.0, 0.0);
+    for (h, r) in &set.pairs {
+        let n = h.frames.len().min(r.frames.len());
+        for start in (0..n).step_by(CHUNK) {
+            let range = start..(start + CHUNK).min(n);
+            let x = batch(h, range.clone())?;
+            let fake = tch::no_grad(|| nets.g.forward(&x));
+            for (k, t) in range.enumerate() {
+                let ours = to_rgb(&fake.get(k as i64))?;
+                let truth = to_rgb(
+                    &Tensor::from_slice(&to_chw(&r.rgb(t)?, r.width, r.height, size)).view([
+                        3,
+                        cfg.image_size,
+                        cfg.image_size,
+                    ]),
+                )?;
+                let raw = to_rgb(&x.get(k as i64))?;
+                let s = size as usize;
+                let score = |a: &[u8]| -> Result<f64> {
+                    let bad = |e: milv_quality::Error| Error::Data(e.to_string());
+                    ssim(
+                        Rgb::new(a, s, s).map_err(bad)?,
+                        Rgb::new(&truth, s, s).map_err(bad)?,
+                        SsimMode::Gray,
+                    )
+                    .map_err(bad)
+                };
+                sum += score(&ours)?;
+                sum_raw += score(&raw)?;
+                rep.ssim_frames += 1;
+            }
+        }
+        rep.ssim_episodes += 1;
+    }
+    if rep.ssim_frames > 0 {
+        rep.ssim = Some(sum / rep.ssim_frames as f64);
+        rep.ssim_untranslated = Some(sum_raw / rep.ssim_frames as f64);
+    }
+    let (mut abs, mut sq, mut zero, mut count) = (0.0, 0.0, 0.0, 0usize);
+    for c in &set.held_out {
+        let Some(actions) = &c.actions else { continue };
+        let n = c.frames.len();
+        for start in (0..n - 1).step_by(CHUNK) {
+            let range = start..(start + CHUNK).min(n - 1);
+            let (a, b) = (
+                batch(c, range.clone())?,
+                batch(c, range.start + 1..range.end + 1)?,
+            );
+            let pred = tch::no_grad(|| nets.predict_action(&a, &b)).to_kind(Kind::Float);
+            let p: Vec<f32> = Vec::try_from(pred.to_device(tch::Device::Cpu).contiguous().view([-1]))?;
+            let d = cfg.action_dim as usize;
+            for (k, t) in range.enumerate() {
+                for j in 0..d.min(actions[t].len()) {
+                    let e = f64::from(p[k * d + j] - actions[t][j]);
+                    abs += e.abs();
+                    sq += e * e;
+                    zero += f64::from(actions[t][j]).abs();
+                    count += 1;
+                }
+            }
+        }
+        rep.action_frames += n - 1;
+    }
+    if count > 0 {
+        rep.action_mae = Some(abs / count as f64);
+        rep.action_rmse = Some((sq / count as f64).sqrt());
+        rep.action_mae_zero = Some(zero / count as f64);
+    }
+    Ok(rep)
+}

@@ -1,0 +1,278 @@
+//! The training loop around [`ACycleGan::step`]: prefetched batches, JSON-lines losses,
+//! translation grids, periodic evaluation, checkpoints and resume.
+//!
+//! A run folder holds `losses.jsonl` (one line per step), `eval.jsonl` (one line per
+//! evaluation), `grids/step-N.png` (rows of human | G(human) | F(G(human))) and
+//! `checkpoints/step-N/`.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+
+use serde::Serialize;
+use tch::Tensor;
+use tch::nn::Module;
+
+use crate::checkpoint::{self, DataRef};
+use crate::cyclegan::{ACycleGan, Losses};
+use crate::data::{Loader, TrainingSet};
+use crate::eval::{EvalReport, EvalSet, evaluate};
+use crate::{Error, Result};
+
+#[derive(Clone, Debug)]
+pub struct RunOptions {
+    pub out: PathBuf,
+    /// Translation grid every N steps (0: never).
+    pub grid_every: u64,
+    pub checkpoint_every: u64,
+    pub eval_every: u64,
+    /// Decoding threads and batches decoded ahead.
+    pub workers: usize,
+    pub prefetch: usize,
+}
+
+impl Default for RunOptions {
+    fn default() -> Self {
+        RunOptions {
+            out: PathBuf::from("run"),
+            grid_every: 500,
+            checkpoint_every: 1000,
+            eval_every: 0,
+            workers: 2,
+            prefetch: 8,
+        }
+    }
+}
+
+/// One line of `losses.jsonl`.
+#[derive(Clone, Debug, Serialize)]
+pub struct StepLog {
+    pub step: u64,
+    #[serde(flatten)]
+    pub losses: Losses,
+    /// Wall time of the optimisation step.
+    pub step_ms: f64,
+    /// Time the step waited for its batch (0 when the loader kept ahead).
+    pub wait_ms: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct TrainReport {
+    pub steps_run: u64,
+    pub step: u64,
+    pub mean_step_ms: f64,
+    /// Steps whose batch was not ready when asked for.
+    pub waited_steps: u64,
+    pub last: Option<Losses>,
+    pub checkpoint: Option<PathBuf>,
+    pub model_id: Option<String>,
+    pub eval: Option<EvalReport>,
+}
+
+fn append_json(path: &Path, v: &impl Serialize) -> Result<()> {
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .map_err(|e| Error::io(path, e))?;
+    let line = serde_json::to_string(v).map_err(|e| Error::Io(e.to_string()))?;
+    writeln!(f, "{line}").map_err(|e| Error::io(path, e))
+}
+
+/// Trains `run` up to `run.train.steps`, from wherever it stands (a resumed run starts
+/// at its checkpoint's step and draws the same batches an uninterrupted run would).
+pub fn train(
+    run: &mut ACycleGan,
+    set: Arc<TrainingSet>,
+    data: &DataRef,
+    eval: Option<&EvalSet>,
+    opts: &RunOptions,
+    on_step: &mut dyn FnMut(&StepLog),
+) -> Result<TrainReport> {
+    for d in [opts.out.clone(), opts.out.join("grids")] {
+        std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
+    }
+    let losses_path = opts.out.join("losses.jsonl");
+    let eval_path = opts.out.join("eval.jsonl");
+    let ckpt_dir = opts.out.join("checkpoints");
+    let size = run.model.image_size as u32;
+    let grid_src = grid_inputs(&set, size)?;
+    let mut loader = Loader::start(
+        set.clone(),
+        run.train.seed,
+        run.step,
+        run.train.batch as usize,
+        size,
+        opts.workers,
+        opts.prefetch,
+    );
+    let mut report = TrainReport {
+        steps_run: 0,
+        step: run.step,
+        mean_step_ms: 0.0,
+        waited_steps: 0,
+        last: None,
+        checkpoint: None,
+        model_id: None,
+        eval: None,
+    };
+    let mut total_ms = 0.0;
+    while run.step < run.train.steps {
+        let t0 = Instant::now();
+        let (batch, waited) = loader.next_batch()?;
+        let wait_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let t1 = Instant::now();
+        let losses = run.step(&batch);
+        let step_ms = t1.elapsed().as_secs_f64() * 1e3;
+        if !losses.generators.is_finite() {
+            return Err(Error::Data(format!(
+                "step {}: the generators' loss is {} (diverged); lower --lr or --lr-idm",
+                run.step, losses.generators
+            )));
+        }
+        total_ms += step_ms;
+        report.steps_run += 1;
+        report.waited_steps += u64::from(waited);
+        let line = StepLog {
+            step: run.step,
+            losses,
+            step_ms,
+            wait_ms,
+        };
+        append_json(&losses_path, &line)?;
+        on_step(&line);
+        let at = |every: u64| every > 0 && run.step.is_multiple_of(every);
+        if at(opts.grid_every) || run.step == run.train.steps {
+            write_grid(
+                run,
+                &grid_src,
+                &opts.out.join("grids").join(format!("step-{:08}.png", run.step)),
+            )?;
+        }
+        if let Some(e) = eval
+            && (at(opts.eval_every) || (opts.eval_every > 0 && run.step == run.train.steps))
+        {
+            let mut r = evaluate(&run.nets, e, &run.model)?;
+            r.step = run.step;
+            append_json(&eval_path, &r)?;
+            report.eval = Some(r);
+        }
+        if at(opts.checkpoint_every) || run.step == run.train.steps {
+            let dir = checkpoint::save(run, data, &ckpt_dir)?;
+            report.model_id = Some(checkpoint::read_meta(&dir)?.model_id);
+            report.checkpoint = Some(dir);
+        }
+        report.last = Some(line.losses);
+    }
+    report.step = run.step;
+    report.mean_step_ms = total_ms / report.steps_run.max(1) as f64;
+    Ok(report)
+}
+
+/// Four human frames spread over the training set, as one batch tensor's data.
+fn grid_inputs(set: &TrainingSet, size: u32) -> Result<Vec<f32>> {
+    let n = set.human.len();
+    let mut out = Vec::new();
+    for k in 0..4usize.min(n.max(1)) {
+        let c = &set.human[k * n / 4.min(n).max(1)];
+        out.extend(c.tensor_data(c.frames.len() / 2, size)?);
+    }
+    Ok(out)
+}
+
+/// CHW f32 in [-1, 1] → RGB24.
+pub fn to_rgb(t: &Tensor) -> Result<Vec<u8>> {
+    let (c, h, w) = t.size3()?;
+    let v: Vec<f32> = Vec::try_from(t.to_device(tch::Device::Cpu).contiguous().view([-1]))?;
+    let n = (h * w) as usize;
+    let mut out = vec![0u8; n * 3];
+    for i in 0..n {
+        for ch in 0..c.min(3) as usize {
+            out[i * 3 + ch] = ((v[ch * n + i] + 1.0) * 127.5).round().clamp(0.0, 255.0) as u8;
+        }
+    }
+    Ok(out)
+}
+
+/// Rows of human | G(human) | F(G(human)).
+pub fn write_grid(run: &ACycleGan, src: &[f32], path: &Path) -> Result<()> {
+    let s = run.model.image_size;
+    let x = run.images(src);
+    let (fake, back) = tch::no_grad(|| {
+        let f = run.nets.g.forward(&x);
+        let b = run.nets.f.forward(&f);
+        (f, b)
+    });
+    let rows = x.size()[0];
+    let (w, h) = (3 * s as u32, rows as u32 * s as u32);
+    let mut img = image::RgbImage::new(w, h);
+    for r in 0..rows {
+        for (col, t) in [&x, &fake, &back].iter().enumerate() {
+            let rgb = to_rgb(&t.get(r))?;
+            let tile = image::RgbImage::from_raw(s as u32, s as u32, rgb).unwrap_or_default();
+            image::imageops::replace(&mut img, &tile, col as i64 * s, r * s);
+        }
+    }
+    img.save(path)
+        .map_err(|e| Error::Io(format!("{e}: {}", path.display())))
+}
+
+/// Timings of [`bench_steps`].
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchReport {
+    pub steps: u64,
+    pub median_ms: f64,
+    pub mean_ms: f64,
+    pub min_ms: f64,
+    pub threads: i32,
+    pub image_size: i64,
+}
+
+/// Times full A-CycleGAN steps (batch 1, every loss) on fixed random images, after
+/// `warmup` untimed steps.
+pub fn bench_steps(
+    model: crate::ModelConfig,
+    device: tch::Device,
+    warmup: u64,
+    steps: u64,
+) -> Result<BenchReport> {
+    let s = model.image_size;
+    let mut run = ACycleGan::new(model.clone(), crate::TrainConfig::default(), device)?;
+    let img = |seed: u64| -> Vec<f32> {
+        // A cheap deterministic pattern in [-1, 1].
+        (0..3 * s * s)
+            .map(|i| (((i as u64).wrapping_mul(2_654_435_761) ^ seed) % 2001) as f32 / 1000.0 - 1.0)
+            .collect()
+    };
+    let b = crate::data::Batch {
+        step: 0,
+        x: img(1),
+        y: img(2),
+        ph: img(3),
+        pr: img(4),
+        yt: img(5),
+        yt1: img(6),
+        actions: vec![0.5; model.action_dim as usize],
+    };
+    for _ in 0..warmup {
+        run.step(&b);
+    }
+    let mut ms: Vec<f64> = (0..steps.max(1))
+        .map(|_| {
+            let t = Instant::now();
+            run.step(&b);
+            t.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    let mean = ms.iter().sum::<f64>() / ms.len() as f64;
+    ms.sort_by(f64::total_cmp);
+    Ok(BenchReport {
+        steps: ms.len() as u64,
+        median_ms: ms[ms.len() / 2],
+        mean_ms: mean,
+        min_ms: ms[0],
+        threads: tch::get_num_threads(),
+        image_size: s,
+    })
+}

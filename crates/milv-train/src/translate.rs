@@ -1,0 +1,287 @@
+//! Human episodes into imagined robot data (paper section 4.1): for every frame x^h,
+//! the imagined frame ŷ^r = G(x^h), its latent ẑ^r = E_F(ŷ^r) from F's encoder and the
+//! imagined action â^r_t = π_I(ẑ^r_t, ẑ^r_t+1) (the last frame gets π_I(ẑ_T, ẑ_T), the
+//! model's action for "no change"), committed as the `imagined` table of one model.
+//!
+//! Episodes stream one at a time through chunks of frames, so memory stays bounded by
+//! one episode's encoded frames and one chunk of tensors.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use milv_data::{
+    CommitMeta, Dataset, Episode, ImaginedRow, ImaginedRows, Partition, ShardOptions, TableKind, ops,
+};
+use serde::Serialize;
+use tch::nn::Module;
+use tch::{Kind, Tensor};
+
+use crate::config::ModelConfig;
+use crate::cyclegan::{ACycleGan, Nets};
+use crate::data::{downcast, load_clips};
+use crate::train::to_rgb;
+use crate::{Error, Result};
+
+/// How latents are stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LatentDtype {
+    F16,
+    F32,
+}
+
+impl std::str::FromStr for LatentDtype {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "f16" => Ok(LatentDtype::F16),
+            "f32" => Ok(LatentDtype::F32),
+            _ => Err(format!("unknown latent dtype {s:?} (f16 | f32)")),
+        }
+    }
+}
+
+impl LatentDtype {
+    pub fn name(self) -> &'static str {
+        match self {
+            LatentDtype::F16 => "f16",
+            LatentDtype::F32 => "f32",
+        }
+    }
+
+    fn kind(self) -> Kind {
+        match self {
+            LatentDtype::F16 => Kind::Half,
+            LatentDtype::F32 => Kind::Float,
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct TranslateOptions {
+    /// Frames per forward pass.
+    pub chunk: usize,
+    pub latent: LatentDtype,
+    /// Only these episodes (default: every human episode).
+    pub episodes: Option<BTreeSet<String>>,
+    pub partition: Option<Partition>,
+}
+
+impl Default for TranslateOptions {
+    fn default() -> Self {
+        TranslateOptions {
+            chunk: 8,
+            latent: LatentDtype::F16,
+            episodes: None,
+            partition: None,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct TranslateReport {
+    pub read_version: u64,
+    /// The new version, or the read one when there was nothing to do.
+    pub version: u64,
+    pub model_id: String,
+    pub episodes: usize,
+    pub frames: u64,
+    /// Episodes this model had already translated at the read version.
+    pub already_done: usize,
+    pub latent_dtype: LatentDtype,
+    pub latent_shape: [i64; 3],
+}
+
+/// Episodes of `model_id` already in the imagined table at `v`.
+fn translated_by(ds: &Dataset, v: u64, model_id: &str) -> Result<BTreeSet<String>> {
+    let mut out = BTreeSet::new();
+    for b in ds.scan(TableKind::Imagined, v, Some(&["episode_id", "model_id"]))? {
+        let b = b?;
+        let ids = downcast::<milv_data::arrow::array::StringArray>(b.column(0))?;
+        let models = downcast::<milv_data::arrow::array::StringArray>(b.column(1))?;
+        for i in 0..b.num_rows() {
+            if models.value(i) == model_id {
+                out.insert(ids.value(i).to_string());
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Translates the selected human episodes of version `version` (default latest) and
+/// commits their rows; a re-run with the same model is a no-op.
+pub fn translate(
+    ds: &Dataset,
+    version: Option<u64>,
+    run: &ACycleGan,
+    model_id: &str,
+    opts: &TranslateOptions,
+    mut meta: CommitMeta,
+    progress: &mut dyn FnMut(usize, usize),
+) -> Result<TranslateReport> {
+    let (nets, cfg) = (&run.nets, &run.model);
+    let v = ds.resolve(version)?;
+    let eps = ops::episodes(ds, v)?;
+    if let Some(want) = &opts.episodes
+        && let Some(missing) = want.iter().find(|id| !eps.iter().any(|e| &e.episode_id == *id))
+    {
+        return Err(Error::Data(format!("no episode {missing} at version {v}")));
+    }
+    let done = translated_by(ds, v, model_id)?;
+    let todo: Vec<&Episode> = eps
+        .iter()
+        .filter(|e| e.domain == "human")
+        .filter(|e| opts.episodes.as_ref().is_none_or(|w| w.contains(&e.episode_id)))
+        .filter(|e| opts.partition.is_none_or(|p| p.contains_key(&e.episode_id)))
+        .collect();
+    if todo.is_empty() {
+        return Err(Error::Data(format!(
+            "no human episodes to translate at version {v}"
+        )));
+    }
+    let fresh: Vec<&Episode> = todo
+        .iter()
+        .copied()
+        .filter(|e| !done.contains(&e.episode_id))
+        .collect();
+    let mut report = TranslateReport {
+        read_version: v,
+        version: v,
+        model_id: model_id.into(),
+        episodes: 0,
+        frames: 0,
+        already_done: todo.len() - fresh.len(),
+        latent_dtype: opts.latent,
+        latent_shape: cfg.latent_shape(),
+    };
+    if fresh.is_empty() {
+        return Ok(report);
+    }
+    meta.summary = serde_json::json!({
+        "model_id": model_id, "read_version": v, "episodes": fresh.len(),
+        "latent_dtype": opts.latent.name(), "latent_shape": cfg.latent_shape(),
+    });
+    let mut txn = ds.begin(meta)?;
+    let mut w = txn.shard_writer(TableKind::Imagined, ShardOptions::default())?;
+    let mut ids = Vec::new();
+    let written = (|| -> Result<()> {
+        for (k, e) in fresh.iter().enumerate() {
+            let one: BTreeMap<String, Episode> = [(e.episode_id.clone(), (*e).clone())].into();
+            let clip = load_clips(ds, v, &one, false)?
+                .remove(&e.episode_id)
+                .ok_or_else(|| {
+                    Error::Data(format!("episode {} has no frames at version {v}", e.episode_id))
+                })?;
+            w.begin_episode()?;
+            report.frames += translate_clip(nets, cfg, model_id, opts, &clip, &mut |rows| {
+                w.push(rows.finish()?)?;
+                Ok(())
+            })?;
+            w.end_episode()?;
+            ids.push(e.episode_id.clone());
+            report.episodes += 1;
+            progress(k + 1, fresh.len());
+        }
+        Ok(())
+    })();
+    if let Err(e) = written {
+        w.abort();
+        txn.abort();
+        return Err(e);
+    }
+    txn.add_files(TableKind::Imagined, w.finish()?, ids);
+    report.version = txn.commit()?;
+    Ok(report)
+}
+
+/// Translates one clip chunk by chunk, handing each chunk's rows to `emit`; returns the
+/// number of frames.
+fn translate_clip(
+    nets: &Nets,
+    cfg: &ModelConfig,
+    model_id: &str,
+    opts: &TranslateOptions,
+    clip: &crate::data::Clip,
+    emit: &mut dyn FnMut(&mut ImaginedRows) -> Result<()>,
+) -> Result<u64> {
+    let size = cfg.image_size as u32;
+    let n = clip.frames.len();
+    let dev = nets.vs_g.device();
+    let shape: Vec<i32> = cfg.latent_shape().iter().map(|&d| d as i32).collect();
+    // Each chunk needs the latent of the next chunk's first frame for its last action, so
+    // chunks are translated one ahead.
+    let run_chunk = |range: std::ops::Range<usize>| -> Result<(Tensor, Tensor)> {
+        let mut data = Vec::with_capacity(range.len() * 3 * (size * size) as usize);
+        for t in range.clone() {
+            data.extend(clip.tensor_data(t, size)?);
+        }
+        let x = Tensor::from_slice(&data)
+            .view([range.len() as i64, 3, cfg.image_size, cfg.image_size])
+            .to_device(dev);
+        Ok(tch::no_grad(|| {
+            let y = nets.g.forward(&x);
+            let z = nets.f.encode(&y);
+            (y, z)
+        }))
+    };
+    let chunk = opts.chunk.max(1);
+    let starts: Vec<usize> = (0..n).step_by(chunk).collect();
+    let mut cur = run_chunk(0..chunk.min(n))?;
+    let mut rows = ImaginedRows::new();
+    for (ci, &start) in starts.iter().enumerate() {
+        let end = (start + chunk).min(n);
+        let next = match starts.get(ci + 1) {
+            Some(&s) => Some(run_chunk(s..(s + chunk).min(n))?),
+            None => None,
+        };
+        let (y, z) = &cur;
+        // z_{t+1} for every frame of the chunk: the chunk shifted by one, then the next
+        // chunk's first latent (or the last latent again at the end of the clip).
+        let tail = match &next {
+            Some((_, zn)) => zn.narrow(0, 0, 1),
+            None => z.narrow(0, z.size()[0] - 1, 1),
+        };
+        let z_next = Tensor::cat(&[z.narrow(0, 1, z.size()[0] - 1), tail], 0);
+        let actions = tch::no_grad(|| nets.idm.forward(z, &z_next)).to_kind(Kind::Float);
+        let actions: Vec<f32> = Vec::try_from(actions.to_device(tch::Device::Cpu).contiguous().view([-1]))?;
+        let latents = z
+            .to_kind(opts.latent.kind())
+            .to_device(tch::Device::Cpu)
+            .contiguous();
+        let per = latents.numel() / (end - start);
+        let elt = opts.latent.kind().elt_size_in_bytes();
+        let mut bytes = vec![0u8; latents.numel() * elt];
+        latents.f_copy_data_u8(&mut bytes, latents.numel())?;
+        let d = cfg.action_dim as usize;
+        for (k, t) in (start..end).enumerate() {
+            let rgb = to_rgb(&y.get(k as i64))?;
+            let mut png = Vec::new();
+            milv_data::frame_codec::encode(
+                milv_data::frame_codec::FrameEncoding::Png,
+                &rgb,
+                size,
+                size,
+                &mut png,
+            )
+            .map_err(|e| Error::Data(format!("episode {}: frame {t}: {e}", clip.episode_id)))?;
+            rows.push(&ImaginedRow {
+                episode_id: &clip.episode_id,
+                frame_index: t as i32,
+                timestamp_ns: clip.timestamps[t],
+                model_id,
+                image: &png,
+                latent: Some((
+                    &bytes[k * per * elt..(k + 1) * per * elt],
+                    opts.latent.name(),
+                    &shape,
+                )),
+                action: Some(&actions[k * d..(k + 1) * d]),
+            });
+        }
+        emit(&mut rows)?;
+        match next {
+            Some(nx) => cur = nx,
+            None => break,
+        }
+    }
+    Ok(n as u64)
+}

@@ -1,0 +1,227 @@
+//! `milv-train` end to end on a small simulated dataset: train, resume, translate,
+//! evaluate, and the errors users meet.
+#![allow(clippy::unwrap_used)]
+
+mod common;
+
+use std::path::Path;
+use std::process::Command;
+
+use milv_data::arrow::array::{Array, BinaryArray, ListArray, StringArray};
+use milv_data::{Dataset, TableKind};
+
+fn train_bin() -> &'static str {
+    env!("CARGO_BIN_EXE_milv-train")
+}
+
+fn run(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(train_bin()).args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn json(args: &[&str]) -> serde_json::Value {
+    let (code, out, err) = run(args);
+    assert_eq!(code, 0, "{args:?}: {err}");
+    serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"))
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+const TINY: [&str; 6] = ["--tiny", "--size", "32", "--threads", "1", "--json"];
+
+#[test]
+fn trains_resumes_translates_and_evaluates() {
+    let dir = tempfile::tempdir().unwrap();
+    let fx = common::sim_dataset(dir.path(), 3, true);
+    let runs = dir.path().join("run");
+    let mut args = vec![
+        "cyclegan",
+        s(&fx.root),
+        "--out",
+        s(&runs),
+        "--steps",
+        "6",
+        "--grid-every",
+        "3",
+    ];
+    args.extend([
+        "--checkpoint-every",
+        "3",
+        "--eval-every",
+        "3",
+        "--truth",
+        s(&fx.truth),
+    ]);
+    args.extend(TINY);
+    let rep = json(&args);
+    assert_eq!(rep["step"], 6);
+    let lines = std::fs::read_to_string(runs.join("losses.jsonl")).unwrap();
+    assert_eq!(lines.lines().count(), 6);
+    let first: serde_json::Value = serde_json::from_str(lines.lines().next().unwrap()).unwrap();
+    for k in ["gan_g", "cycle", "aux", "idm", "d_x", "step_ms", "wait_ms"] {
+        assert!(first[k].as_f64().unwrap().is_finite(), "{k}: {first}");
+    }
+    // The auxiliary loss saw aligned pairs.
+    assert!(first["aux"].as_f64().unwrap() > 0.0);
+    let grid = image::open(runs.join("grids/step-00000006.png")).unwrap();
+    assert_eq!((grid.width(), grid.height()), (3 * 32, 3 * 32));
+    let eval = &rep["eval"];
+    assert!(eval["ssim"].as_f64().unwrap().abs() <= 1.0, "{eval}");
+    assert_eq!(eval["ssim_episodes"], 3);
+    assert!(eval["action_mae"].as_f64().unwrap() >= 0.0);
+    assert_eq!(
+        std::fs::read_to_string(runs.join("eval.jsonl"))
+            .unwrap()
+            .lines()
+            .count(),
+        2
+    );
+
+    // Resume: continues at step 6 and appends.
+    let mut more = vec![
+        "cyclegan",
+        s(&fx.root),
+        "--out",
+        s(&runs),
+        "--steps",
+        "8",
+        "--resume",
+    ];
+    more.extend(TINY);
+    assert_eq!(json(&more)["steps_run"], 2);
+    assert_eq!(
+        std::fs::read_to_string(runs.join("losses.jsonl"))
+            .unwrap()
+            .lines()
+            .count(),
+        8
+    );
+    // Without --resume an existing run is not overwritten.
+    let (code, _, err) = run(&[
+        "cyclegan",
+        s(&fx.root),
+        "--out",
+        s(&runs),
+        "--tiny",
+        "--size",
+        "32",
+    ]);
+    assert_eq!(code, 1);
+    assert!(err.contains("--resume"), "{err}");
+
+    let ckpt = runs.join("checkpoints/step-00000008");
+    let tr = json(&[
+        "translate",
+        s(&fx.root),
+        "--checkpoint",
+        s(&ckpt),
+        "--chunk",
+        "5",
+        "--json",
+    ]);
+    assert_eq!(tr["frames"].as_u64().unwrap() as usize, fx.human_frames);
+    let model = tr["model_id"].as_str().unwrap().to_string();
+    // A second run is a no-op.
+    let again = json(&["translate", s(&fx.root), "--checkpoint", s(&ckpt), "--json"]);
+    assert_eq!(
+        (again["episodes"].as_u64(), again["version"].clone()),
+        (Some(0), tr["version"].clone())
+    );
+
+    // Every latent decodes to the recorded dtype and shape; every frame has an action.
+    let ds = Dataset::open(&fx.root).unwrap();
+    let v = ds.latest_version().unwrap();
+    let mut rows = 0;
+    for b in ds.scan(TableKind::Imagined, v, None).unwrap() {
+        let b = b.unwrap();
+        let col = |n: &str| b.column_by_name(n).unwrap();
+        let lat = col("latent").as_any().downcast_ref::<BinaryArray>().unwrap();
+        let dt = col("latent_dtype")
+            .as_any()
+            .downcast_ref::<StringArray>()
+            .unwrap();
+        let shape = col("latent_shape").as_any().downcast_ref::<ListArray>().unwrap();
+        let act = col("action").as_any().downcast_ref::<ListArray>().unwrap();
+        let models = col("model_id").as_any().downcast_ref::<StringArray>().unwrap();
+        for i in 0..b.num_rows() {
+            assert_eq!(models.value(i), model);
+            assert_eq!(dt.value(i), "f16");
+            let sh = shape.value(i);
+            let sh = sh
+                .as_any()
+                .downcast_ref::<milv_data::arrow::array::Int32Array>()
+                .unwrap();
+            assert_eq!(sh.values().to_vec(), vec![8, 8, 8]);
+            assert_eq!(lat.value(i).len(), 8 * 8 * 8 * 2);
+            assert_eq!(act.value(i).len(), 2);
+            assert!(!act.is_null(i));
+        }
+        rows += b.num_rows();
+    }
+    assert_eq!(rows, fx.human_frames);
+
+    let ev = json(&[
+        "eval",
+        s(&fx.root),
+        "--checkpoint",
+        s(&ckpt),
+        "--truth",
+        s(&fx.truth),
+        "--json",
+    ]);
+    assert_eq!(ev["step"], 8);
+    assert!(ev["ssim_frames"].as_u64().unwrap() > 0);
+    assert!(ev["action_mae_zero"].as_f64().unwrap() > 0.0);
+}
+
+#[test]
+fn corrupt_checkpoints_and_missing_random_videos_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let no_random = common::sim_dataset(dir.path(), 2, false);
+    let runs = dir.path().join("run");
+    let (code, _, err) = run(&[
+        "cyclegan",
+        s(&no_random.root),
+        "--out",
+        s(&runs),
+        "--tiny",
+        "--size",
+        "32",
+    ]);
+    assert_eq!(code, 1);
+    assert!(err.contains("no robot random videos"), "{err}");
+
+    let other = tempfile::tempdir().unwrap();
+    let fx = common::sim_dataset(other.path(), 2, true);
+    let mut args = vec!["cyclegan", s(&fx.root), "--out", s(&runs), "--steps", "2"];
+    args.extend(TINY);
+    json(&args);
+    let ckpt = runs.join("checkpoints/step-00000002");
+    let g = ckpt.join("G.safetensors");
+    let bytes = std::fs::read(&g).unwrap();
+    std::fs::write(&g, &bytes[..bytes.len() / 2]).unwrap();
+    let (code, _, err) = run(&["translate", s(&fx.root), "--checkpoint", s(&ckpt)]);
+    assert_eq!(code, 1);
+    assert!(err.contains("corrupt") && err.contains("step-00000002"), "{err}");
+    // Nothing was committed.
+    let ds = Dataset::open(&fx.root).unwrap();
+    assert!(
+        ds.files(TableKind::Imagined, ds.latest_version().unwrap())
+            .unwrap()
+            .is_empty()
+    );
+    let (code, _, err) = run(&[
+        "translate",
+        s(&fx.root),
+        "--checkpoint",
+        s(&dir.path().join("nope")),
+    ]);
+    assert_eq!(code, 1);
+    assert!(err.contains("checkpoint.json"), "{err}");
+}
