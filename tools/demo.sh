@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The whole pipeline on the bundled samples: ingest human and robot clips with their
-# action sidecars, score every frame's quality and curate by it, then inspect and verify
-# the dataset. Prints where everything is.
+# action sidecars, align the paired clips, train a (short) A-CycleGAN and translate the
+# human clips into imagined robot data, score every frame's quality and curate by it,
+# then inspect and verify the dataset. Prints where everything is.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 tools/setup.sh
@@ -27,8 +28,21 @@ echo "   (every pair, from pixels alone: motion features)"
 "$BIN/milv-align" "$DS" --features motion --truth "$OUT/warps.jsonl"
 PAIR=$(head -1 samples/sim/drawing/warps.jsonl | sed 's/.*"pair_id":"\([^"]*\)".*/\1/')
 "$BIN/milv-align" show "$DS" "$PAIR" --features state -o "$OUT/align_$PAIR.png"
+echo "== milv-train cyclegan: A-CycleGAN + inverse dynamics, 300 steps at 64x64 (a demo, not a model)"
+"$BIN/milv-train" cyclegan "$DS" --out "$OUT/acyclegan" --size 64 --steps 300 --alignment motion \
+  --grid-every 100 --checkpoint-every 300
+CKPT="$OUT/acyclegan/checkpoints/step-00000300"
+echo "== milv-train translate: every human episode -> the imagined table (G(x), F-encoder latent, action)"
+"$BIN/milv-train" translate "$DS" --checkpoint "$CKPT"
+cat samples/sim/drawing/ground_truth.jsonl samples/sim/pushing/ground_truth.jsonl > "$OUT/ground_truth.jsonl"
+echo "== milv-train eval: translations against the simulator's ground-truth robot renderings"
+"$BIN/milv-train" eval "$DS" --checkpoint "$CKPT" --truth "$OUT/ground_truth.jsonl"
+echo "== milv-align --features translated: the pairs again, in the robot domain"
+"$BIN/milv-align" "$DS" --features translated --pairs "$SIM_PAIRS" --truth "$OUT/warps.jsonl"
 echo "== milv-score run: beta_qua = Brenner x SSIM of every frame -> the scores table"
 "$BIN/milv-score" run "$DS"
+echo "   (and of every imagined frame)"
+"$BIN/milv-score" run "$DS" --table imagined
 echo "== milv-score curate: the best 80 % of frames by weight -> the curated view"
 "$BIN/milv-score" curate "$DS" --top-fraction 0.8
 echo "== milv-score report"
@@ -52,7 +66,8 @@ PY
 cat <<TXT
 
 Outputs:
-  dataset           $DS   (Delta tables: episodes, frames, alignments, scores, curated; version log: $DS/_milv/versions)
+  dataset           $DS   (Delta tables: episodes, frames, alignments, imagined, scores, curated; version log: $DS/_milv/versions)
+  A-CycleGAN run    $OUT/acyclegan (losses.jsonl, grids/step-*.png: human | G(human) | F(G(human)), checkpoints/)
   quality plots     $OUT/quality/beta_hist.png, $OUT/quality/beta_curves.png
   an alignment      $OUT/align_$PAIR.png (cost matrix of one human/robot pair, with its path)
   read it elsewhere .venv/bin/python -c "import polars as pl; print(pl.read_delta('$DS/frames').head())"

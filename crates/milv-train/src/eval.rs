@@ -50,10 +50,12 @@ impl EvalSet {
             let full = base.join(f);
             let canon = std::fs::canonicalize(&full).unwrap_or_else(|_| full.clone());
             let uri = |p: &Path| by_uri.get(p.to_string_lossy().as_ref()).copied();
-            uri(&full).or_else(|| uri(&canon)).or_else(|| match by_file.get(file_name(f)) {
-                Some(v) if v.len() == 1 => Some(v[0]),
-                _ => None,
-            })
+            uri(&full)
+                .or_else(|| uri(&canon))
+                .or_else(|| match by_file.get(file_name(f)) {
+                    Some(v) if v.len() == 1 => Some(v[0]),
+                    _ => None,
+                })
         };
         let mut wanted_pairs: Vec<(String, String)> = Vec::new();
         if let Some(path) = truth {

@@ -276,3 +276,110 @@ pub fn bench_steps(
         image_size: s,
     })
 }
+
+/// The loader's throughput, against what training consumes.
+#[derive(Clone, Debug, Serialize)]
+pub struct LoaderBench {
+    pub batches: u64,
+    pub workers: usize,
+    /// Images decoded per second (six per sample: x, y, an aligned pair, a transition).
+    pub frames_per_s: f64,
+    pub batches_per_s: f64,
+}
+
+/// Decodes `batches` batches through the prefetching [`Loader`] as fast as it goes.
+pub fn bench_loader(
+    set: Arc<TrainingSet>,
+    size: u32,
+    batch: usize,
+    workers: usize,
+    batches: u64,
+) -> Result<LoaderBench> {
+    let per_batch = batch * if set.pairs.is_empty() { 4 } else { 6 };
+    let mut loader = Loader::start(set, 0, 0, batch, size, workers, 16);
+    // The first batch pays for thread start-up.
+    loader.next_batch()?;
+    let t = Instant::now();
+    for _ in 0..batches {
+        loader.next_batch()?;
+    }
+    let secs = t.elapsed().as_secs_f64().max(1e-9);
+    Ok(LoaderBench {
+        batches,
+        workers,
+        frames_per_s: (batches as usize * per_batch) as f64 / secs,
+        batches_per_s: batches as f64 / secs,
+    })
+}
+
+/// Learning curves of runs (their `eval.jsonl`) as PNG charts in `out`: SSIM of the
+/// translations against ground truth, and π_I's action error. Returns the files written.
+pub fn plot_runs(runs: &[PathBuf], out: &Path) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    let mut ssim = Vec::new();
+    let mut act = Vec::new();
+    let mut baseline: Option<(f64, f64)> = None;
+    for r in runs {
+        let path = r.join("eval.jsonl");
+        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let name = r
+            .file_name()
+            .map_or_else(|| r.display().to_string(), |n| n.to_string_lossy().into_owned());
+        let (mut s, mut a) = (Vec::new(), Vec::new());
+        for line in text.lines().filter(|l| !l.trim().is_empty()) {
+            let v: serde_json::Value =
+                serde_json::from_str(line).map_err(|e| Error::Data(format!("{}: {e}", path.display())))?;
+            let step = v["step"].as_f64().unwrap_or(0.0);
+            if let Some(x) = v["ssim"].as_f64() {
+                s.push((step, x));
+            }
+            if let Some(x) = v["action_mae"].as_f64() {
+                a.push((step, x));
+            }
+            if let (Some(u), Some(z)) = (v["ssim_untranslated"].as_f64(), v["action_mae_zero"].as_f64()) {
+                baseline = Some((u, z));
+            }
+        }
+        ssim.push(milv_plot::Series {
+            name: name.clone(),
+            points: s,
+        });
+        act.push(milv_plot::Series { name, points: a });
+    }
+    let span = |series: &[milv_plot::Series]| {
+        let xs = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
+        (
+            xs.clone().fold(f64::INFINITY, f64::min),
+            xs.fold(f64::NEG_INFINITY, f64::max),
+        )
+    };
+    if let Some((u, z)) = baseline {
+        let (lo, hi) = span(&ssim);
+        ssim.push(milv_plot::Series {
+            name: "untranslated human frame".into(),
+            points: vec![(lo, u), (hi, u)],
+        });
+        act.push(milv_plot::Series {
+            name: "always predict 0".into(),
+            points: vec![(lo, z), (hi, z)],
+        });
+    }
+    let files = [out.join("ssim.png"), out.join("action_mae.png")];
+    let plot = |p: &Path, s: &[milv_plot::Series], title: &str, y: &str| {
+        milv_plot::lines_png(p, s, title, "training step", y)
+            .map_err(|e| Error::Io(format!("{e}: {}", p.display())))
+    };
+    plot(
+        &files[0],
+        &ssim,
+        "SSIM(G(human), ground-truth robot frame), held-out tasks",
+        "SSIM",
+    )?;
+    plot(
+        &files[1],
+        &act,
+        "inverse dynamics on held-out robot random videos",
+        "action MAE (cm)",
+    )?;
+    Ok(files.to_vec())
+}

@@ -64,6 +64,10 @@ enum Cmd {
     /// Time A-CycleGAN steps on random data (no dataset): the tool side of
     /// tools/bench/train_step.py.
     BenchStep(BenchArgs),
+    /// The data loader's decode throughput on a dataset, against a step's consumption.
+    BenchLoader(LoaderArgs),
+    /// Learning curves (SSIM, action error) of runs' eval.jsonl as PNG charts.
+    Report(ReportArgs),
 }
 
 #[derive(clap::Args, Debug)]
@@ -185,6 +189,37 @@ struct BenchArgs {
     rt: Runtime,
 }
 
+#[derive(clap::Args, Debug)]
+struct LoaderArgs {
+    dataset: DatasetRef,
+    #[arg(long, default_value_t = 128)]
+    size: u32,
+    #[arg(long, default_value_t = 200)]
+    batches: u64,
+    #[arg(long, default_value_t = 2)]
+    workers: usize,
+    #[arg(long, default_value_t = 1)]
+    batch: usize,
+    /// A step time (ms) to compare with, e.g. from `bench-step`.
+    #[arg(long)]
+    step_ms: Option<f64>,
+    /// Alignment run (id or feature kind), when the table has several.
+    #[arg(long)]
+    alignment: Option<String>,
+    #[command(flatten)]
+    rt: Runtime,
+}
+
+#[derive(clap::Args, Debug)]
+struct ReportArgs {
+    /// Run folders (each with an eval.jsonl).
+    #[arg(required = true)]
+    runs: Vec<PathBuf>,
+    /// Folder for the charts.
+    #[arg(long, short)]
+    out: PathBuf,
+}
+
 fn main() -> std::process::ExitCode {
     cli::finish("milv-train", run(Cli::parse()))
 }
@@ -195,6 +230,13 @@ fn run(c: Cli) -> anyhow::Result<u8> {
         Cmd::Translate(a) => cmd_translate(a),
         Cmd::Eval(a) => cmd_eval(a),
         Cmd::BenchStep(a) => cmd_bench(a),
+        Cmd::BenchLoader(a) => cmd_bench_loader(a),
+        Cmd::Report(a) => {
+            for f in milv_train::train::plot_runs(&a.runs, &a.out)? {
+                println!("{}", f.display());
+            }
+            Ok(cli::EXIT_OK)
+        }
     }
 }
 
@@ -451,6 +493,41 @@ fn cmd_bench(a: BenchArgs) -> anyhow::Result<u8> {
             "A-CycleGAN step at {0}x{0} on {1}: median {2:.1} ms, mean {3:.1} ms over {4} steps ({5} threads)",
             a.size, a.rt.device, r.median_ms, r.mean_ms, r.steps, r.threads
         );
+    }
+    Ok(cli::EXIT_OK)
+}
+
+fn cmd_bench_loader(a: LoaderArgs) -> anyhow::Result<u8> {
+    let ds = Dataset::open(&a.dataset.root)?;
+    let v = ds.resolve(a.dataset.version)?;
+    let set = TrainingSet::load(
+        &ds,
+        v,
+        &DataOptions {
+            alignment: a.alignment.clone(),
+            no_alignments: false,
+        },
+    )?;
+    let r = milv_train::train::bench_loader(Arc::new(set), a.size, a.batch, a.workers, a.batches)?;
+    // A step consumes six images per sample (x, y, an aligned pair, a transition).
+    let needed = a.step_ms.map(|ms| (6 * a.batch) as f64 / (ms / 1e3));
+    if a.rt.json {
+        cli::print_json(
+            &serde_json::json!({"loader": r, "step_ms": a.step_ms, "consumed_frames_per_s": needed,
+            "ratio": needed.map(|n| r.frames_per_s / n)}),
+        )?;
+    } else {
+        println!(
+            "loader: {:.0} frames/s ({:.1} batches/s) on {} workers at {}x{}",
+            r.frames_per_s, r.batches_per_s, r.workers, a.size, a.size
+        );
+        if let Some(n) = needed {
+            println!(
+                "a {:.0} ms step consumes {n:.0} frames/s: the loader is {:.1}x ahead",
+                a.step_ms.unwrap_or(0.0),
+                r.frames_per_s / n
+            );
+        }
     }
     Ok(cli::EXIT_OK)
 }
