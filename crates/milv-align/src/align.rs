@@ -3,9 +3,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
-use milv_data::arrow::array::{
-    Array, ArrayRef, BinaryArray, Float32Array, Float64Array, Int32Array, ListArray, RecordBatch, StringArray,
-};
+use milv_data::arrow::array::{Array, ArrayRef, Float64Array, Int32Array, RecordBatch, StringArray};
 use milv_data::frame_codec::FrameEncoding;
 use milv_data::{CommitMeta, Dataset, Episode, Partition, ShardOptions, TableKind, ops};
 use rayon::prelude::*;
@@ -127,16 +125,6 @@ fn pairs_of(episodes: &[Episode]) -> BTreeMap<String, std::result::Result<(Episo
         .collect()
 }
 
-fn list_f32(l: &ListArray, i: usize) -> Option<Vec<f32>> {
-    if l.is_null(i) {
-        return None;
-    }
-    let v = l.value(i);
-    v.as_any()
-        .downcast_ref::<Float32Array>()
-        .map(|a| a.values().to_vec())
-}
-
 fn col<'a, T: 'static>(b: &'a RecordBatch, name: &str) -> Result<&'a T> {
     b.column_by_name(name)
         .and_then(|c| c.as_any().downcast_ref::<T>())
@@ -151,66 +139,26 @@ fn load_clips(
     model: Option<&str>,
     wanted: &BTreeMap<String, &Episode>,
 ) -> Result<BTreeMap<String, Clip>> {
-    let mut cols = vec!["episode_id", "frame_index", "image"];
-    if table == TableKind::Frames {
-        cols.push("state");
-    } else {
-        cols.push("model_id");
-    }
-    // Per episode: (frame index, image, state) rows, and whether any row has a state.
-    type Rows = (Vec<(i32, Vec<u8>, Option<Vec<f32>>)>, bool);
-    let mut clips: BTreeMap<String, Rows> = BTreeMap::new();
-    for b in ds.scan(table, v, Some(&cols))? {
-        let b = b?;
-        let ids: &StringArray = col(&b, "episode_id")?;
-        let idx: &Int32Array = col(&b, "frame_index")?;
-        let img: &BinaryArray = col(&b, "image")?;
-        let states: Option<&ListArray> = if table == TableKind::Frames {
-            Some(col(&b, "state")?)
-        } else {
-            None
-        };
-        let models: Option<&StringArray> = if table == TableKind::Imagined {
-            Some(col(&b, "model_id")?)
-        } else {
-            None
-        };
-        for i in 0..b.num_rows() {
-            let id = ids.value(i);
-            if !wanted.contains_key(id) || models.is_some_and(|m| Some(m.value(i)) != model) {
-                continue;
-            }
-            let st = states.and_then(|s| list_f32(s, i));
-            let e = clips.entry(id.to_string()).or_default();
-            e.1 |= st.is_some();
-            e.0.push((idx.value(i), img.value(i).to_vec(), st));
-        }
-    }
-    let mut out = BTreeMap::new();
-    for (id, (mut rows, has_states)) in clips {
-        rows.sort_by_key(|r| r.0);
-        let ep = wanted[&id];
-        let imagined = table == TableKind::Imagined;
-        let states = if has_states {
-            rows.iter().map(|r| r.2.clone()).collect::<Option<Vec<_>>>()
-        } else {
-            None
-        };
-        out.insert(
-            id.clone(),
-            Clip {
-                episode_id: id,
+    let imagined = table == TableKind::Imagined;
+    let vector = (!imagined).then_some("state");
+    let rows = milv_data::episode_rows(ds, v, table, &|id| wanted.contains_key(id), vector, model)?;
+    Ok(rows
+        .into_iter()
+        .map(|(id, r)| {
+            let ep = wanted[&id];
+            let clip = Clip {
+                episode_id: id.clone(),
                 domain: ep.domain.clone(),
                 encoding: FrameEncoding::from_name(&ep.frame_encoding).unwrap_or(FrameEncoding::Png),
                 // Imagined frames are PNGs of the model's size: decode without a size check.
                 width: if imagined { 0 } else { ep.width as u32 },
                 height: if imagined { 0 } else { ep.height as u32 },
-                images: rows.into_iter().map(|r| r.1).collect(),
-                states,
-            },
-        );
-    }
-    Ok(out)
+                states: r.all_vectors(),
+                images: r.images,
+            };
+            (id, clip)
+        })
+        .collect())
 }
 
 /// The only translation model of the imagined table, or the one asked for.

@@ -90,11 +90,18 @@ impl std::str::FromStr for GanLoss {
     }
 }
 
+fn one() -> i64 {
+    1
+}
+
 /// Training settings (paper section 4.1 and Appendix A.2 for the defaults).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TrainConfig {
     pub steps: u64,
     pub batch: i64,
+    /// Robot transitions per step for π_I (the paper trains everything at batch 1).
+    #[serde(default = "one")]
+    pub idm_batch: i64,
     /// Generators and discriminators: Adam, this rate, β1 = `beta1`.
     pub lr: f64,
     pub beta1: f64,
@@ -119,6 +126,7 @@ impl Default for TrainConfig {
         TrainConfig {
             steps: 10_000,
             batch: 1,
+            idm_batch: 1,
             lr: 2e-4,
             beta1: 0.5,
             lr_idm: 0.01,
@@ -130,5 +138,19 @@ impl Default for TrainConfig {
             decoupled: false,
             seed: 0,
         }
+    }
+}
+
+impl TrainConfig {
+    pub fn validate(&self) -> Result<(), crate::Error> {
+        if self.batch < 1 || self.idm_batch < 1 {
+            return Err(crate::Error::Config(
+                "--batch and --idm-batch must be at least 1".into(),
+            ));
+        }
+        if !(self.lr > 0.0 && self.lr_idm > 0.0) {
+            return Err(crate::Error::Config("learning rates must be positive".into()));
+        }
+        Ok(())
     }
 }

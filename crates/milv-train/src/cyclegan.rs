@@ -149,6 +149,7 @@ impl ACycleGan {
     /// Fresh networks (initialised from `train.seed`).
     pub fn new(model: ModelConfig, train: TrainConfig, device: Device) -> Result<ACycleGan> {
         model.validate()?;
+        train.validate()?;
         tch::manual_seed(train.seed as i64);
         let nets = Nets::new(&model, train.decoupled, device);
         let adam = |vs: &nn::VarStore, lr: f64, b1: f64| Adam::new(vs, lr, b1);

@@ -17,9 +17,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 
-use milv_data::arrow::array::{
-    Array, BinaryArray, Float32Array, Int32Array, Int64Array, ListArray, StringArray,
-};
+use milv_data::arrow::array::{Array, Int32Array, StringArray};
 use milv_data::frame_codec::{self, FrameEncoding};
 use milv_data::{Dataset, Episode, TableKind, ops};
 use rand::{Rng, SeedableRng, rngs::StdRng};
@@ -79,78 +77,39 @@ pub fn load_clips(
     wanted: &BTreeMap<String, Episode>,
     with_actions: bool,
 ) -> Result<BTreeMap<String, Clip>, Error> {
-    let mut cols = vec!["episode_id", "frame_index", "timestamp_ns", "image"];
-    if with_actions {
-        cols.push("action");
-    }
-    type Row = (i32, i64, Vec<u8>, Option<Vec<f32>>);
-    let mut rows: BTreeMap<String, Vec<Row>> = BTreeMap::new();
-    for b in ds.scan(TableKind::Frames, v, Some(&cols))? {
-        let b = b?;
-        let col = |name: &str| {
-            b.column_by_name(name)
-                .ok_or_else(|| Error::Data(format!("frames table lacks column {name}")))
-        };
-        let ids = downcast::<StringArray>(col("episode_id")?)?;
-        let idx = downcast::<Int32Array>(col("frame_index")?)?;
-        let ts = downcast::<Int64Array>(col("timestamp_ns")?)?;
-        let img = downcast::<BinaryArray>(col("image")?)?;
-        let act = if with_actions {
-            Some(downcast::<ListArray>(col("action")?)?)
-        } else {
-            None
-        };
-        for i in 0..b.num_rows() {
-            if !wanted.contains_key(ids.value(i)) {
-                continue;
-            }
-            let a = act.and_then(|l| {
-                (!l.is_null(i)).then(|| {
-                    l.value(i)
-                        .as_any()
-                        .downcast_ref::<Float32Array>()
-                        .map(|f| f.values().to_vec())
-                })?
-            });
-            rows.entry(ids.value(i).to_string()).or_default().push((
-                idx.value(i),
-                ts.value(i),
-                img.value(i).to_vec(),
-                a,
-            ));
-        }
-    }
-    let mut out = BTreeMap::new();
-    for (id, mut r) in rows {
-        r.sort_by_key(|x| x.0);
-        let ep = &wanted[&id];
-        let actions = if with_actions {
-            Some(
-                r.iter()
-                    .enumerate()
-                    .map(|(t, x)| {
-                        x.3.clone()
-                            .ok_or_else(|| Error::Data(format!("episode {id}: frame {t} has no action")))
-                    })
-                    .collect::<Result<Vec<_>, _>>()?,
-            )
-        } else {
-            None
-        };
-        out.insert(
-            id.clone(),
-            Clip {
-                episode_id: id,
+    let vector = with_actions.then_some("action");
+    let rows = milv_data::episode_rows(
+        ds,
+        v,
+        TableKind::Frames,
+        &|id| wanted.contains_key(id),
+        vector,
+        None,
+    )?;
+    rows.into_iter()
+        .map(|(id, r)| {
+            let actions = if with_actions {
+                let missing = r.vectors.iter().position(Option::is_none);
+                if let Some(t) = missing {
+                    return Err(Error::Data(format!("episode {id}: frame {t} has no action")));
+                }
+                r.all_vectors()
+            } else {
+                None
+            };
+            let ep = &wanted[&id];
+            let clip = Clip {
+                episode_id: id.clone(),
                 encoding: FrameEncoding::from_name(&ep.frame_encoding).unwrap_or(FrameEncoding::Png),
                 width: ep.width as u32,
                 height: ep.height as u32,
-                timestamps: r.iter().map(|x| x.1).collect(),
-                frames: r.into_iter().map(|x| x.2).collect(),
+                frames: r.images,
+                timestamps: r.timestamp_ns,
                 actions,
-            },
-        );
-    }
-    Ok(out)
+            };
+            Ok((id, clip))
+        })
+        .collect()
 }
 
 pub fn downcast<T: 'static>(a: &Arc<dyn Array>) -> Result<&T, Error> {
@@ -366,8 +325,23 @@ pub struct Batch {
     pub actions: Vec<f32>,
 }
 
+/// How many samples of each kind a step draws.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BatchShape {
+    /// Human images, robot images and aligned pairs.
+    pub images: usize,
+    /// Robot transitions for π_I.
+    pub transitions: usize,
+}
+
 /// Draws and decodes step `step`'s batch (deterministic in `(seed, step)`).
-pub fn make_batch(set: &TrainingSet, seed: u64, step: u64, batch: usize, size: u32) -> Result<Batch, Error> {
+pub fn make_batch(
+    set: &TrainingSet,
+    seed: u64,
+    step: u64,
+    shape: BatchShape,
+    size: u32,
+) -> Result<Batch, Error> {
     let mut rng = StdRng::seed_from_u64(seed ^ step.wrapping_mul(0x9E37_79B9_7F4A_7C15));
     let mut b = Batch {
         step,
@@ -383,7 +357,7 @@ pub fn make_batch(set: &TrainingSet, seed: u64, step: u64, batch: usize, size: u
         let c = &clips[rng.random_range(0..clips.len())];
         (c, rng.random_range(0..c.frames.len()))
     }
-    for _ in 0..batch {
+    for _ in 0..shape.images {
         let (c, t) = any_frame(&set.human, &mut rng);
         b.x.extend(c.tensor_data(t, size)?);
         let (c, t) = any_frame(&set.robot, &mut rng);
@@ -398,6 +372,8 @@ pub fn make_batch(set: &TrainingSet, seed: u64, step: u64, batch: usize, size: u
                 out.extend(clip.tensor_data(*f, size)?);
             }
         }
+    }
+    for _ in 0..shape.transitions {
         let c = &set.robot[rng.random_range(0..set.robot.len())];
         let t = rng.random_range(0..c.frames.len() - 1);
         b.yt.extend(c.tensor_data(t, size)?);
@@ -423,7 +399,7 @@ impl Loader {
         set: Arc<TrainingSet>,
         seed: u64,
         start: u64,
-        batch: usize,
+        shape: BatchShape,
         size: u32,
         workers: usize,
         ahead: usize,
@@ -437,7 +413,7 @@ impl Loader {
                 std::thread::spawn(move || {
                     while !stop.load(Ordering::Relaxed) {
                         let s = counter.fetch_add(1, Ordering::Relaxed);
-                        if tx.send(make_batch(&set, seed, s, batch, size)).is_err() {
+                        if tx.send(make_batch(&set, seed, s, shape, size)).is_err() {
                             break;
                         }
                     }

@@ -102,7 +102,10 @@ pub fn train(
         set.clone(),
         run.train.seed,
         run.step,
-        run.train.batch as usize,
+        crate::data::BatchShape {
+            images: run.train.batch as usize,
+            transitions: run.train.idm_batch as usize,
+        },
         size,
         opts.workers,
         opts.prefetch,
@@ -296,7 +299,11 @@ pub fn bench_loader(
     batches: u64,
 ) -> Result<LoaderBench> {
     let per_batch = batch * if set.pairs.is_empty() { 4 } else { 6 };
-    let mut loader = Loader::start(set, 0, 0, batch, size, workers, 16);
+    let shape = crate::data::BatchShape {
+        images: batch,
+        transitions: batch,
+    };
+    let mut loader = Loader::start(set, 0, 0, shape, size, workers, 16);
     // The first batch pays for thread start-up.
     loader.next_batch()?;
     let t = Instant::now();

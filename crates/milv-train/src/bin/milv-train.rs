@@ -91,6 +91,9 @@ struct TrainArgs {
     tiny: bool,
     #[arg(long, default_value_t = 1)]
     batch: i64,
+    /// Robot transitions per step for the inverse-dynamics loss.
+    #[arg(long, default_value_t = 1)]
+    idm_batch: i64,
     /// Generators' and discriminators' Adam learning rate.
     #[arg(long, default_value_t = 2e-4)]
     lr: f64,
@@ -220,6 +223,18 @@ struct ReportArgs {
     out: PathBuf,
 }
 
+/// The paper's networks at `size`, or the tiny ones of tests.
+fn model_config(tiny: bool, size: i64) -> ModelConfig {
+    if tiny {
+        ModelConfig::tiny(size)
+    } else {
+        ModelConfig {
+            image_size: size,
+            ..ModelConfig::default()
+        }
+    }
+}
+
 fn main() -> std::process::ExitCode {
     cli::finish("milv-train", run(Cli::parse()))
 }
@@ -277,17 +292,11 @@ fn cmd_train(a: TrainArgs) -> anyhow::Result<u8> {
                     ckpts.display()
                 );
             }
-            let model = if a.tiny {
-                ModelConfig::tiny(a.size)
-            } else {
-                ModelConfig {
-                    image_size: a.size,
-                    ..ModelConfig::default()
-                }
-            };
+            let model = model_config(a.tiny, a.size);
             let train_cfg = TrainConfig {
                 steps: a.steps,
                 batch: a.batch,
+                idm_batch: a.idm_batch,
                 lr: a.lr,
                 lr_idm: a.lr_idm,
                 lambda_cyc: a.lambda_cyc,
@@ -477,14 +486,7 @@ fn cmd_eval(a: EvalArgs) -> anyhow::Result<u8> {
 
 fn cmd_bench(a: BenchArgs) -> anyhow::Result<u8> {
     let dev = a.rt.apply()?;
-    let model = if a.tiny {
-        ModelConfig::tiny(a.size)
-    } else {
-        ModelConfig {
-            image_size: a.size,
-            ..ModelConfig::default()
-        }
-    };
+    let model = model_config(a.tiny, a.size);
     let r = milv_train::train::bench_steps(model, dev, a.warmup, a.steps)?;
     if a.rt.json {
         cli::print_json(&r)?;
