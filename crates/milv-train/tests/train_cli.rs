@@ -33,6 +33,11 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// `cyclegan DATASET --out RUN` with tiny networks and the default step count.
+fn fresh_run<'a>(ds: &'a Path, run: &'a Path) -> Vec<&'a str> {
+    vec!["cyclegan", s(ds), "--out", s(run), "--tiny", "--size", "32"]
+}
+
 const TINY: [&str; 6] = ["--tiny", "--size", "32", "--threads", "1", "--json"];
 
 #[test]
@@ -103,15 +108,7 @@ fn trains_resumes_translates_and_evaluates() {
         8
     );
     // Without --resume an existing run is not overwritten.
-    let (code, _, err) = run(&[
-        "cyclegan",
-        s(&fx.root),
-        "--out",
-        s(&runs),
-        "--tiny",
-        "--size",
-        "32",
-    ]);
+    let (code, _, err) = run(&fresh_run(&fx.root, &runs));
     assert_eq!(code, 1);
     assert!(err.contains("--resume"), "{err}");
 
@@ -185,15 +182,7 @@ fn corrupt_checkpoints_and_missing_random_videos_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
     let no_random = common::sim_dataset(dir.path(), 2, false);
     let runs = dir.path().join("run");
-    let (code, _, err) = run(&[
-        "cyclegan",
-        s(&no_random.root),
-        "--out",
-        s(&runs),
-        "--tiny",
-        "--size",
-        "32",
-    ]);
+    let (code, _, err) = run(&fresh_run(&no_random.root, &runs));
     assert_eq!(code, 1);
     assert!(err.contains("no robot random videos"), "{err}");
 
