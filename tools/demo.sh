@@ -47,6 +47,11 @@ echo "== milv-score curate: the best 80 % of frames by weight -> the curated vie
 "$BIN/milv-score" curate "$DS" --top-fraction 0.8
 echo "== milv-score report"
 "$BIN/milv-score" report "$DS" --worst 5 --out "$OUT/quality"
+echo "== milv-export mcap: human | imagined | aligned robot frames, latents, actions, beta -> MCAP (Foxglove)"
+"$BIN/milv-export" mcap "$DS" --alignment motion -o "$OUT/translations.mcap"
+echo "== milv-export rerun: the same as a Rerun recording, worst beta first"
+"$BIN/milv-export" rerun "$DS" --alignment motion --sort beta -o "$OUT/translations.rrd"
+.venv/bin/rerun rrd verify "$OUT/translations.rrd"
 echo "== milv-ds info"
 "$BIN/milv-ds" info "$DS"
 echo "== milv-ds log"
@@ -70,6 +75,7 @@ Outputs:
   A-CycleGAN run    $OUT/acyclegan (losses.jsonl, grids/step-*.png: human | G(human) | F(G(human)), checkpoints/)
   quality plots     $OUT/quality/beta_hist.png, $OUT/quality/beta_curves.png
   an alignment      $OUT/align_$PAIR.png (cost matrix of one human/robot pair, with its path)
+  translations      $OUT/translations.mcap (open in Foxglove), $OUT/translations.rrd (.venv/bin/rerun $OUT/translations.rrd)
   read it elsewhere .venv/bin/python -c "import polars as pl; print(pl.read_delta('$DS/frames').head())"
   inspect           target/debug/milv-ds info|log|verify $DS[@VERSION]
   the two domains   samples/contact_sheet.png (rows: human / robot, same motion)

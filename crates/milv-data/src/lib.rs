@@ -49,12 +49,13 @@ pub mod read;
 pub mod rows;
 pub mod schema;
 pub mod shard;
+pub mod view;
 
 pub use dataset::{Dataset, DatasetRef, TableFile, Transaction};
 pub use error::{Error, Result};
 pub use log::{CommitMeta, FileAdd, InputDigest, TableChange, VersionEntry, run_id};
 pub use partition::Partition;
-pub use read::{EpisodeRows, episode_rows};
+pub use read::{AlignedPair, AlignmentRun, EpisodeRows, ScoreRow, alignment_run, episode_rows, score_run};
 pub use rows::{Episode, FrameRows, ImaginedRow, ImaginedRows, episodes_from_batches, episodes_to_batch};
 pub use schema::{ColType, Column, SCHEMA_VERSION, TableKind};
 pub use shard::{ClosedShard, ShardOptions, ShardWriter};
@@ -64,3 +65,25 @@ pub use deltalake::{arrow, parquet};
 
 /// Version of the MILV tools, recorded in every commit.
 pub const TOOL_VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// A temporary file in `out`'s folder, for writers that rename onto `out` only when the
+/// file is complete (a failed write then leaves nothing under the final name).
+pub fn temp_file_beside(out: &std::path::Path) -> Result<tempfile::NamedTempFile> {
+    let dir = match out.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    let name = out
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    tempfile::Builder::new()
+        .prefix(&format!(".{name}."))
+        .suffix(".tmp")
+        .tempfile_in(&dir)
+        .map_err(|source| Error::Io {
+            op: "cannot create the output file in",
+            source,
+            path: dir,
+        })
+}

@@ -11,9 +11,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 use std::sync::Mutex;
 
-use milv_data::arrow::array::{
-    Array, ArrayRef, BinaryArray, Float64Array, Int32Array, RecordBatch, StringArray,
-};
+use milv_data::arrow::array::{ArrayRef, BinaryArray, Float64Array, Int32Array, RecordBatch, StringArray};
 use milv_data::frame_codec::{self, FrameEncoding};
 use milv_data::{CommitMeta, Dataset, Episode, Partition, ShardOptions, TableKind, ops};
 use milv_quality::{ClipScorer, FrameScore, Rgb};
@@ -532,72 +530,4 @@ fn scores_batch(
     Ok(RecordBatch::try_new(TableKind::Scores.arrow_schema(), cols)?)
 }
 
-/// One row of the scores table.
-#[derive(Clone, Debug, Serialize)]
-pub struct ScoreRow {
-    pub episode_id: String,
-    pub frame_index: i32,
-    pub source_table: String,
-    pub model_id: Option<String>,
-    pub brenner_raw: f64,
-    pub brenner: f64,
-    pub ssim: f64,
-    pub beta: f64,
-}
-
-/// The rows of one scoring run at `version`: the given run, or the most recently added.
-pub fn read_run(ds: &Dataset, version: u64, run_id: Option<&str>) -> Result<(String, Vec<ScoreRow>)> {
-    let files = ds.files(TableKind::Scores, version)?;
-    let run_id = match run_id {
-        Some(r) => r.to_string(),
-        None => {
-            let newest = files.iter().max_by_key(|f| f.added_in).ok_or_else(|| {
-                Error::EmptySelection(format!(
-                    "{}@{version} has no scores; run `milv-score run` first",
-                    ds.root().display()
-                ))
-            })?;
-            let mut it = milv_data::dataset::read_file(&newest.abs_path, Some(&["run_id"]))?;
-            let b = it
-                .next()
-                .transpose()?
-                .ok_or_else(|| Error::Invalid(format!("empty scores file {}", newest.abs_path.display())))?;
-            let r: &StringArray = column(&b, "run_id")?;
-            r.value(0).to_string()
-        }
-    };
-    let mut rows = Vec::new();
-    for b in ds.scan(TableKind::Scores, version, None)? {
-        let b = b?;
-        let run: &StringArray = column(&b, "run_id")?;
-        let ids: &StringArray = column(&b, "episode_id")?;
-        let idx: &Int32Array = column(&b, "frame_index")?;
-        let src: &StringArray = column(&b, "source_table")?;
-        let model: &StringArray = column(&b, "model_id")?;
-        let f = |n: &str| column::<Float64Array>(&b, n);
-        let (raw, br, ss, be) = (f("brenner_raw")?, f("brenner")?, f("ssim")?, f("beta")?);
-        for i in 0..b.num_rows() {
-            if run.value(i) != run_id {
-                continue;
-            }
-            rows.push(ScoreRow {
-                episode_id: ids.value(i).to_string(),
-                frame_index: idx.value(i),
-                source_table: src.value(i).to_string(),
-                model_id: model.is_valid(i).then(|| model.value(i).to_string()),
-                brenner_raw: raw.value(i),
-                brenner: br.value(i),
-                ssim: ss.value(i),
-                beta: be.value(i),
-            });
-        }
-    }
-    if rows.is_empty() {
-        return Err(Error::EmptySelection(format!(
-            "scoring run {run_id} has no rows at {}@{version}",
-            ds.root().display()
-        )));
-    }
-    rows.sort_by(|a, b| (&a.episode_id, a.frame_index).cmp(&(&b.episode_id, b.frame_index)));
-    Ok((run_id, rows))
-}
+pub use milv_data::read::{ScoreRow, score_run as read_run};

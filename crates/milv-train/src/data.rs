@@ -17,11 +17,11 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 
-use milv_data::arrow::array::{Array, Int32Array, StringArray};
+use milv_data::arrow::array::Array;
 use milv_data::frame_codec::{self, FrameEncoding};
+use milv_data::read::{AlignedPair, AlignmentRun};
 use milv_data::{Dataset, Episode, TableKind, ops};
 use rand::{Rng, SeedableRng, rngs::StdRng};
-use serde::Serialize;
 
 use crate::Error;
 
@@ -118,21 +118,6 @@ pub fn downcast<T: 'static>(a: &Arc<dyn Array>) -> Result<&T, Error> {
         .ok_or_else(|| Error::Data("a column has an unexpected type".into()))
 }
 
-/// One aligned cell: (human episode, frame) ↔ (robot episode, frame).
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct AlignedPair {
-    pub human: (String, usize),
-    pub robot: (String, usize),
-}
-
-/// Which alignment run the auxiliary loss uses.
-#[derive(Clone, Debug, Serialize)]
-pub struct AlignmentRun {
-    pub run_id: String,
-    pub features: String,
-    pub rows: usize,
-}
-
 /// The rows of one alignment run: `want` names a run id or a feature kind; without it
 /// the table must hold exactly one run.
 pub fn load_alignments(
@@ -140,65 +125,12 @@ pub fn load_alignments(
     v: u64,
     want: Option<&str>,
 ) -> Result<(AlignmentRun, Vec<AlignedPair>), Error> {
-    let mut runs: BTreeMap<(String, String), Vec<AlignedPair>> = BTreeMap::new();
-    let cols = [
-        "human_episode_id",
-        "human_frame",
-        "robot_episode_id",
-        "robot_frame",
-        "features",
-        "run_id",
-    ];
-    for b in ds.scan(TableKind::Alignments, v, Some(&cols))? {
-        let b = b?;
-        let c = |i: usize| b.column(i);
-        let (he, hf, re, rf) = (
-            downcast::<StringArray>(c(0))?,
-            downcast::<Int32Array>(c(1))?,
-            downcast::<StringArray>(c(2))?,
-            downcast::<Int32Array>(c(3))?,
-        );
-        let (feat, run) = (downcast::<StringArray>(c(4))?, downcast::<StringArray>(c(5))?);
-        for i in 0..b.num_rows() {
-            runs.entry((run.value(i).to_string(), feat.value(i).to_string()))
-                .or_default()
-                .push(AlignedPair {
-                    human: (he.value(i).to_string(), hf.value(i) as usize),
-                    robot: (re.value(i).to_string(), rf.value(i) as usize),
-                });
-        }
-    }
-    if runs.is_empty() {
-        return Err(Error::Data(format!(
-            "version {v} has no alignments (run `milv-align` on the paired clips, or train \
-             without the auxiliary loss: --lambda-aux 0)"
-        )));
-    }
-    let matching: Vec<&(String, String)> = runs
-        .keys()
-        .filter(|(run, feat)| want.is_none_or(|w| w == run || w == feat))
-        .collect();
-    let key = match matching.as_slice() {
-        [one] => (*one).clone(),
-        _ => {
-            let listed: Vec<String> = runs.keys().map(|(r, f)| format!("{r} ({f})")).collect();
-            return Err(Error::Data(format!(
-                "{} alignment runs match{}: {}; choose one with --alignment RUN_ID",
-                matching.len(),
-                want.map(|w| format!(" {w:?}")).unwrap_or_default(),
-                listed.join(", ")
-            )));
-        }
-    };
-    let rows = runs.remove(&key).unwrap_or_default();
-    Ok((
-        AlignmentRun {
-            run_id: key.0,
-            features: key.1,
-            rows: rows.len(),
-        },
-        rows,
-    ))
+    Ok(milv_data::read::alignment_run(
+        ds,
+        v,
+        want,
+        "run `milv-align` on the paired clips, or train without the auxiliary loss: --lambda-aux 0",
+    )?)
 }
 
 /// Everything a training run samples from, in memory (encoded).

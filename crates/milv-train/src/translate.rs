@@ -159,6 +159,8 @@ pub fn translate(
     meta.summary = serde_json::json!({
         "model_id": model_id, "read_version": v, "episodes": fresh.len(),
         "latent_dtype": opts.latent.name(), "latent_shape": cfg.latent_shape(),
+        // Exporters attach this, so a recording names the nets that made it.
+        "model_config": cfg, "decoupled": run.train.decoupled,
     });
     let mut txn = ds.begin(meta)?;
     let mut w = txn.shard_writer(TableKind::Imagined, ShardOptions::default())?;

@@ -1,0 +1,688 @@
+//! The per-frame view the exporters (MCAP, Rerun) show: each recorded frame of an episode
+//! joined with what later stages made of it — its translation by one model (imagined
+//! frame, latent, predicted action), its quality scores and curated weight, and the robot
+//! frame it was aligned to (with that frame's true action).
+//!
+//! [`ViewPlan::new`] checks the selection and reads the small tables (episodes, scores,
+//! curated weights, alignments) once; [`ViewPlan::views`] then streams the episodes in
+//! groups, one pass over `frames` and `imagined` per group, so memory holds one group's
+//! images at a time.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+
+use deltalake::arrow::array::{Array, BinaryArray, Float64Array, Int32Array, ListArray, StringArray};
+use serde::Serialize;
+
+use crate::dataset::{Dataset, read_file};
+use crate::error::{Error, Result};
+use crate::frame_codec::{self, FrameEncoding};
+use crate::read::{AlignmentRun, alignment_run, episode_rows, score_run};
+use crate::rows::Episode;
+use crate::schema::TableKind;
+
+/// What to show.
+#[derive(Clone, Debug)]
+pub struct ViewOptions {
+    /// Episodes to show (human or robot); default: every human episode the model translated.
+    pub episodes: Option<Vec<String>>,
+    /// Translation model; default: the only one in the `imagined` table.
+    pub model_id: Option<String>,
+    /// Scoring run for the quality numbers; default: the newest run over this model.
+    pub score_run: Option<String>,
+    /// Alignment run (id or feature kind) for the aligned robot frames; default: the newest.
+    pub alignment: Option<String>,
+    /// Episodes per pass over the frame tables (bounds memory).
+    pub group: usize,
+}
+
+impl Default for ViewOptions {
+    fn default() -> Self {
+        ViewOptions {
+            episodes: None,
+            model_id: None,
+            score_run: None,
+            alignment: None,
+            group: 16,
+        }
+    }
+}
+
+/// An encoded image as viewers take it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    /// `png` or `jpeg` (raw frames are re-encoded as PNG).
+    pub format: &'static str,
+    pub data: Vec<u8>,
+}
+
+/// A latent tensor as stored: little-endian values of `dtype` in row-major `shape`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Latent {
+    pub dtype: String,
+    pub shape: Vec<i32>,
+    pub data: Vec<u8>,
+}
+
+impl Latent {
+    fn item_size(dtype: &str) -> Option<usize> {
+        match dtype {
+            "f16" => Some(2),
+            "f32" => Some(4),
+            _ => None,
+        }
+    }
+
+    /// Checks that the bytes hold exactly `shape` values of `dtype`.
+    pub fn check(&self) -> std::result::Result<(), String> {
+        let size =
+            Latent::item_size(&self.dtype).ok_or_else(|| format!("unknown latent dtype {:?}", self.dtype))?;
+        if self.shape.iter().any(|d| *d <= 0) {
+            return Err(format!(
+                "latent shape {:?} has a non-positive dimension",
+                self.shape
+            ));
+        }
+        let want = self.shape.iter().map(|d| *d as usize).product::<usize>() * size;
+        if self.data.len() != want {
+            return Err(format!(
+                "latent of shape {:?} ({}) has {} bytes, expected {want}",
+                self.shape,
+                self.dtype,
+                self.data.len()
+            ));
+        }
+        Ok(())
+    }
+
+    /// The values as f32.
+    pub fn to_f32(&self) -> std::result::Result<Vec<f32>, String> {
+        self.check()?;
+        Ok(match self.dtype.as_str() {
+            "f16" => self
+                .data
+                .chunks_exact(2)
+                .map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32())
+                .collect(),
+            _ => self
+                .data
+                .chunks_exact(4)
+                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+                .collect(),
+        })
+    }
+}
+
+/// One translated frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Imagined {
+    pub image: Image,
+    pub latent: Option<Latent>,
+    pub action: Option<Vec<f32>>,
+}
+
+/// Quality of a translated frame (`scores`), with its curated loss weight when a curation
+/// of that scoring run exists (0 for frames the curation dropped).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Quality {
+    pub brenner: f64,
+    pub ssim: f64,
+    pub beta: f64,
+    pub weight: Option<f64>,
+}
+
+/// The robot frame a human frame was aligned to.
+#[derive(Clone, Debug, PartialEq)]
+pub struct AlignedFrame {
+    pub episode_id: String,
+    pub frame_index: i32,
+    pub image: Image,
+    pub action: Option<Vec<f32>>,
+}
+
+/// One frame of an episode and what later stages made of it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameView {
+    pub frame_index: i32,
+    pub timestamp_ns: i64,
+    pub image: Image,
+    /// The recorded action (robot episodes).
+    pub action: Option<Vec<f32>>,
+    pub imagined: Option<Imagined>,
+    pub quality: Option<Quality>,
+    pub aligned: Option<AlignedFrame>,
+}
+
+/// One episode, frame by frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EpisodeView {
+    pub episode: Episode,
+    pub frames: Vec<FrameView>,
+}
+
+impl EpisodeView {
+    /// Mean β over the frames that have one.
+    pub fn mean_beta(&self) -> Option<f64> {
+        mean(self.frames.iter().filter_map(|f| f.quality.map(|q| q.beta)))
+    }
+}
+
+fn mean(it: impl Iterator<Item = f64>) -> Option<f64> {
+    let (n, s) = it.fold((0usize, 0.0), |(n, s), x| (n + 1, s + x));
+    (n > 0).then(|| s / n as f64)
+}
+
+type FrameKey = (String, i32);
+
+/// A checked selection, with the small tables read.
+#[derive(Debug)]
+pub struct ViewPlan {
+    pub version: u64,
+    /// The translation model shown (None when only robot episodes were selected and the
+    /// table has no model).
+    pub model_id: Option<String>,
+    /// The model's configuration, from the version log entry that translated with it.
+    pub model_config: Option<serde_json::Value>,
+    /// Names of the action components (from the robot episodes), e.g. `[dx, dy]`.
+    pub action_names: Vec<String>,
+    pub episodes: Vec<Episode>,
+    pub score_run: Option<String>,
+    pub alignment: Option<AlignmentRun>,
+    /// Shape of every latent of the model (they all share it).
+    pub latent_shape: Option<Vec<i32>>,
+    quality: HashMap<FrameKey, Quality>,
+    aligned: HashMap<FrameKey, FrameKey>,
+    group: usize,
+}
+
+fn column<'a, T: 'static>(
+    b: &'a deltalake::arrow::array::RecordBatch,
+    name: &str,
+    table: TableKind,
+) -> Result<&'a T> {
+    b.column_by_name(name)
+        .and_then(|c| c.as_any().downcast_ref::<T>())
+        .ok_or_else(|| {
+            Error::Invalid(format!(
+                "{table} table: column {name} missing or of an unexpected type"
+            ))
+        })
+}
+
+/// The value of column `out` in the first row `keep` accepts, searching the table's files
+/// newest first (the newest run, curation, … of something).
+fn newest_value(
+    ds: &Dataset,
+    v: u64,
+    table: TableKind,
+    cols: &[&str],
+    out: &str,
+    keep: &dyn Fn(&deltalake::arrow::array::RecordBatch, usize) -> Result<bool>,
+) -> Result<Option<String>> {
+    let mut files = ds.files(table, v)?;
+    files.sort_by_key(|f| std::cmp::Reverse(f.added_in));
+    for f in files {
+        for b in read_file(&f.abs_path, Some(cols))? {
+            let b = b?;
+            let o: &StringArray = column(&b, out, table)?;
+            for i in 0..b.num_rows() {
+                if keep(&b, i)? {
+                    return Ok(Some(o.value(i).to_string()));
+                }
+            }
+        }
+    }
+    Ok(None)
+}
+
+fn is_model(
+    b: &deltalake::arrow::array::RecordBatch,
+    i: usize,
+    table: TableKind,
+    model: &str,
+) -> Result<bool> {
+    let src: &StringArray = column(b, "source_table", table)?;
+    let m: &StringArray = column(b, "model_id", table)?;
+    Ok(src.value(i) == "imagined" && m.is_valid(i) && m.value(i) == model)
+}
+
+/// Models in the `imagined` table, with the episodes each translated.
+fn models(ds: &Dataset, v: u64) -> Result<BTreeMap<String, BTreeSet<String>>> {
+    let mut out: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for b in ds.scan(TableKind::Imagined, v, Some(&["model_id", "episode_id"]))? {
+        let b = b?;
+        let m: &StringArray = column(&b, "model_id", TableKind::Imagined)?;
+        let e: &StringArray = column(&b, "episode_id", TableKind::Imagined)?;
+        for i in 0..b.num_rows() {
+            if !out.get(m.value(i)).is_some_and(|s| s.contains(e.value(i))) {
+                out.entry(m.value(i).to_string())
+                    .or_default()
+                    .insert(e.value(i).to_string());
+            }
+        }
+    }
+    Ok(out)
+}
+
+impl ViewPlan {
+    /// Checks the selection against version `v` and reads the small tables.
+    pub fn new(ds: &Dataset, v: u64, opts: &ViewOptions) -> Result<ViewPlan> {
+        let all = crate::ops::episodes(ds, v)?;
+        let by_id: BTreeMap<&str, &Episode> = all.iter().map(|e| (e.episode_id.as_str(), e)).collect();
+        let models = models(ds, v)?;
+        let wants_model = opts.episodes.as_ref().is_none_or(|w| {
+            w.iter()
+                .any(|id| by_id.get(id.as_str()).is_some_and(|e| e.domain == "human"))
+        });
+        let model_id = match (&opts.model_id, models.len()) {
+            (Some(m), _) if models.contains_key(m) => Some(m.clone()),
+            (Some(m), _) => {
+                return Err(Error::Invalid(format!(
+                    "model {m} has no rows in the imagined table at version {v} (models there: {})",
+                    if models.is_empty() {
+                        "none".to_string()
+                    } else {
+                        models.keys().cloned().collect::<Vec<_>>().join(", ")
+                    }
+                )));
+            }
+            (None, 1) => models.keys().next().cloned(),
+            (None, 0) if wants_model => {
+                return Err(Error::Invalid(format!(
+                    "version {v} has no imagined rows; run `milv-train translate` first"
+                )));
+            }
+            (None, 0) => None,
+            (None, _) => {
+                return Err(Error::Invalid(format!(
+                    "version {v} holds {} translation models ({}); choose one with --model-id",
+                    models.len(),
+                    models.keys().cloned().collect::<Vec<_>>().join(", ")
+                )));
+            }
+        };
+        let translated = model_id
+            .as_ref()
+            .and_then(|m| models.get(m))
+            .cloned()
+            .unwrap_or_default();
+        let episodes: Vec<Episode> = match &opts.episodes {
+            None => all
+                .iter()
+                .filter(|e| translated.contains(&e.episode_id))
+                .cloned()
+                .collect(),
+            Some(want) => {
+                let mut out = Vec::new();
+                for id in want {
+                    let e = by_id
+                        .get(id.as_str())
+                        .ok_or_else(|| Error::Invalid(format!("no episode {id} at version {v}")))?;
+                    if e.domain == "human" && !translated.contains(id) {
+                        return Err(Error::Invalid(format!(
+                            "episode {id} has no imagined rows for model {} at version {v}",
+                            model_id.as_deref().unwrap_or("?")
+                        )));
+                    }
+                    out.push((*e).clone());
+                }
+                out
+            }
+        };
+        if episodes.is_empty() {
+            return Err(Error::Invalid(format!(
+                "nothing to show at version {v}: the selection is empty"
+            )));
+        }
+        let action_names = action_names(&all);
+        let model_config = match &model_id {
+            Some(m) => ds.entries_until(v)?.into_iter().rev().find_map(|e| {
+                let s = &e.meta.summary;
+                (s.get("model_id").and_then(|x| x.as_str()) == Some(m.as_str()))
+                    .then(|| s.get("model_config").cloned())
+                    .flatten()
+            }),
+            None => None,
+        };
+        let (score_run, quality) = match &model_id {
+            Some(m) => read_quality(ds, v, m, opts.score_run.as_deref())?,
+            None => (None, HashMap::new()),
+        };
+        let (alignment, aligned) = read_aligned(ds, v, opts.alignment.as_deref())?;
+        Ok(ViewPlan {
+            version: v,
+            model_id,
+            model_config,
+            action_names,
+            episodes,
+            score_run,
+            alignment,
+            latent_shape: None,
+            quality,
+            aligned,
+            group: opts.group.max(1),
+        })
+    }
+
+    /// Puts the episodes with the lowest mean β first (those without scores last).
+    pub fn sort_by_beta(&mut self) {
+        let beta = |e: &Episode| {
+            mean(
+                self.quality
+                    .iter()
+                    .filter(|((id, _), _)| id == &e.episode_id)
+                    .map(|(_, q)| q.beta),
+            )
+            .unwrap_or(f64::INFINITY)
+        };
+        let mut keyed: Vec<(f64, Episode)> = self.episodes.drain(..).map(|e| (beta(&e), e)).collect();
+        keyed.sort_by(|a, b| a.0.total_cmp(&b.0));
+        self.episodes = keyed.into_iter().map(|(_, e)| e).collect();
+    }
+
+    /// The episodes in plan order, one group of frame-table reads at a time.
+    pub fn views<'a>(&'a mut self, ds: &'a Dataset) -> impl Iterator<Item = Result<EpisodeView>> + 'a {
+        let groups: Vec<Vec<Episode>> = self
+            .episodes
+            .chunks(self.group)
+            .map(<[Episode]>::to_vec)
+            .collect();
+        groups.into_iter().flat_map(move |g| match self.load(ds, &g) {
+            Ok(views) => views.into_iter().map(Ok).collect::<Vec<_>>(),
+            Err(e) => vec![Err(e)],
+        })
+    }
+
+    fn load(&mut self, ds: &Dataset, group: &[Episode]) -> Result<Vec<EpisodeView>> {
+        let v = self.version;
+        let mut wanted: BTreeSet<String> = group.iter().map(|e| e.episode_id.clone()).collect();
+        let own: BTreeSet<String> = wanted.clone();
+        wanted.extend(
+            self.aligned
+                .iter()
+                .filter(|((h, _), _)| own.contains(h))
+                .map(|(_, (r, _))| r.clone()),
+        );
+        let frames = episode_rows(
+            ds,
+            v,
+            TableKind::Frames,
+            &|id| wanted.contains(id),
+            Some("action"),
+            None,
+        )?;
+        let formats: HashMap<String, (FrameEncoding, u32, u32)> = crate::ops::episodes(ds, v)?
+            .into_iter()
+            .filter(|e| wanted.contains(&e.episode_id))
+            .map(|e| {
+                let enc = FrameEncoding::from_name(&e.frame_encoding).unwrap_or_default();
+                (e.episode_id, (enc, e.width as u32, e.height as u32))
+            })
+            .collect();
+        let image = |id: &str, i: usize, rows: &crate::read::EpisodeRows| -> Result<Image> {
+            let f = formats.get(id).copied().unwrap_or((FrameEncoding::Png, 0, 0));
+            viewable(f, &rows.images[i], id)
+        };
+        let mut imagined = match &self.model_id {
+            Some(m) => imagined_rows(ds, v, &own, m)?,
+            None => HashMap::new(),
+        };
+        let mut out = Vec::with_capacity(group.len());
+        for e in group {
+            let id = &e.episode_id;
+            let rows = frames
+                .get(id)
+                .ok_or_else(|| Error::Invalid(format!("episode {id} has no frames at version {v}")))?;
+            let mut fv = Vec::with_capacity(rows.frame_index.len());
+            for (i, &fi) in rows.frame_index.iter().enumerate() {
+                let key = (id.clone(), fi);
+                let im = imagined.remove(&key);
+                if let Some(l) = im.as_ref().and_then(|x| x.latent.as_ref()) {
+                    l.check()
+                        .map_err(|m| Error::Invalid(format!("episode {id} frame {fi}: {m}")))?;
+                    match &self.latent_shape {
+                        Some(s) if s != &l.shape => {
+                            return Err(Error::Invalid(format!(
+                                "episode {id} frame {fi}: latent shape {:?} differs from the model's {s:?}",
+                                l.shape
+                            )));
+                        }
+                        Some(_) => {}
+                        None => self.latent_shape = Some(l.shape.clone()),
+                    }
+                }
+                let aligned = match self.aligned.get(&key) {
+                    Some((r, rf)) => {
+                        let rrows = frames.get(r).ok_or_else(|| {
+                            Error::Invalid(format!("aligned robot episode {r} has no frames"))
+                        })?;
+                        let j = rrows.frame_index.iter().position(|x| x == rf).ok_or_else(|| {
+                            Error::Invalid(format!("aligned robot episode {r} has no frame {rf}"))
+                        })?;
+                        Some(AlignedFrame {
+                            episode_id: r.clone(),
+                            frame_index: *rf,
+                            image: image(r, j, rrows)?,
+                            action: rrows.vectors[j].clone(),
+                        })
+                    }
+                    None => None,
+                };
+                fv.push(FrameView {
+                    frame_index: fi,
+                    timestamp_ns: rows.timestamp_ns[i],
+                    image: image(id, i, rows)?,
+                    action: rows.vectors[i].clone(),
+                    imagined: im,
+                    quality: self.quality.get(&key).copied(),
+                    aligned,
+                });
+            }
+            out.push(EpisodeView {
+                episode: e.clone(),
+                frames: fv,
+            });
+        }
+        Ok(out)
+    }
+}
+
+/// A stored frame as PNG or JPEG bytes (raw frames are encoded as PNG).
+fn viewable((enc, w, h): (FrameEncoding, u32, u32), bytes: &[u8], id: &str) -> Result<Image> {
+    match enc {
+        FrameEncoding::Png => Ok(Image {
+            format: "png",
+            data: bytes.to_vec(),
+        }),
+        FrameEncoding::Jpeg { .. } => Ok(Image {
+            format: "jpeg",
+            data: bytes.to_vec(),
+        }),
+        FrameEncoding::Raw => {
+            let mut data = Vec::new();
+            frame_codec::encode(FrameEncoding::Png, bytes, w, h, &mut data)
+                .map_err(|e| Error::Invalid(format!("episode {id}: raw frame: {e}")))?;
+            Ok(Image { format: "png", data })
+        }
+    }
+}
+
+fn action_names(all: &[Episode]) -> Vec<String> {
+    if let Some(n) = all
+        .iter()
+        .filter(|e| e.domain == "robot")
+        .find_map(|e| e.action_names.clone())
+    {
+        return n;
+    }
+    let dim = all.iter().find_map(|e| e.action_dim).unwrap_or(2);
+    (0..dim).map(|i| format!("a{i}")).collect()
+}
+
+/// β and the curated weight per frame of the newest (or the named) scoring run of `model`.
+fn read_quality(
+    ds: &Dataset,
+    v: u64,
+    model: &str,
+    want: Option<&str>,
+) -> Result<(Option<String>, HashMap<FrameKey, Quality>)> {
+    let cols = ["run_id", "source_table", "model_id"];
+    let run = match want {
+        Some(r) => Some(r.to_string()),
+        None => newest_value(ds, v, TableKind::Scores, &cols, "run_id", &|b, i| {
+            is_model(b, i, TableKind::Scores, model)
+        })?,
+    };
+    let Some(run) = run else {
+        return Ok((None, HashMap::new()));
+    };
+    let (run, rows) = score_run(ds, v, Some(&run))?;
+    let curation = newest_value(
+        ds,
+        v,
+        TableKind::Curated,
+        &["run_id", "source_table", "model_id", "curation_id"],
+        "curation_id",
+        &|b, i| {
+            let r: &StringArray = column(b, "run_id", TableKind::Curated)?;
+            Ok(r.value(i) == run && is_model(b, i, TableKind::Curated, model)?)
+        },
+    )?;
+    let mut weights: HashMap<FrameKey, f64> = HashMap::new();
+    if let Some(c) = &curation {
+        for b in ds.scan(
+            TableKind::Curated,
+            v,
+            Some(&["episode_id", "frame_index", "weight", "curation_id"]),
+        )? {
+            let b = b?;
+            let t = TableKind::Curated;
+            let (ids, idx): (&StringArray, &Int32Array) =
+                (column(&b, "episode_id", t)?, column(&b, "frame_index", t)?);
+            let (w, cid): (&Float64Array, &StringArray) =
+                (column(&b, "weight", t)?, column(&b, "curation_id", t)?);
+            for i in 0..b.num_rows() {
+                if cid.value(i) == c {
+                    weights.insert((ids.value(i).to_string(), idx.value(i)), w.value(i));
+                }
+            }
+        }
+    }
+    let quality = rows
+        .into_iter()
+        .filter(|r| r.source_table == "imagined" && r.model_id.as_deref() == Some(model))
+        .map(|r| {
+            let key = (r.episode_id, r.frame_index);
+            let weight = curation
+                .as_ref()
+                .map(|_| weights.get(&key).copied().unwrap_or(0.0));
+            (
+                key,
+                Quality {
+                    brenner: r.brenner,
+                    ssim: r.ssim,
+                    beta: r.beta,
+                    weight,
+                },
+            )
+        })
+        .collect();
+    Ok((Some(run), quality))
+}
+
+/// Human frame → the first robot frame the named (or newest) alignment run paired it with.
+fn read_aligned(
+    ds: &Dataset,
+    v: u64,
+    want: Option<&str>,
+) -> Result<(Option<AlignmentRun>, HashMap<FrameKey, FrameKey>)> {
+    let want = match want {
+        Some(w) => Some(w.to_string()),
+        None => newest_value(ds, v, TableKind::Alignments, &["run_id"], "run_id", &|_, _| {
+            Ok(true)
+        })?,
+    };
+    let Some(want) = want else {
+        return Ok((None, HashMap::new()));
+    };
+    let (run, pairs) = alignment_run(ds, v, Some(&want), "run `milv-align` first")?;
+    let mut map: HashMap<FrameKey, FrameKey> = HashMap::new();
+    for p in pairs {
+        let (h, r) = ((p.human.0, p.human.1 as i32), (p.robot.0, p.robot.1 as i32));
+        map.entry(h)
+            .and_modify(|x| *x = (*x).clone().min(r.clone()))
+            .or_insert(r);
+    }
+    Ok((Some(run), map))
+}
+
+/// The model's imagined rows of the episodes in `keep`, by (episode, frame).
+fn imagined_rows(
+    ds: &Dataset,
+    v: u64,
+    keep: &BTreeSet<String>,
+    model: &str,
+) -> Result<HashMap<FrameKey, Imagined>> {
+    const T: TableKind = TableKind::Imagined;
+    let cols = [
+        "episode_id",
+        "frame_index",
+        "model_id",
+        "image",
+        "latent",
+        "latent_dtype",
+        "latent_shape",
+        "action",
+    ];
+    let mut out = HashMap::new();
+    for b in ds.scan(T, v, Some(&cols))? {
+        let b = b?;
+        let (ids, idx, m): (&StringArray, &Int32Array, &StringArray) = (
+            column(&b, "episode_id", T)?,
+            column(&b, "frame_index", T)?,
+            column(&b, "model_id", T)?,
+        );
+        let img: &BinaryArray = column(&b, "image", T)?;
+        let (lat, dt, shape): (&BinaryArray, &StringArray, &ListArray) = (
+            column(&b, "latent", T)?,
+            column(&b, "latent_dtype", T)?,
+            column(&b, "latent_shape", T)?,
+        );
+        let act: &ListArray = column(&b, "action", T)?;
+        for i in 0..b.num_rows() {
+            if m.value(i) != model || !keep.contains(ids.value(i)) {
+                continue;
+            }
+            let latent = (!lat.is_null(i)).then(|| Latent {
+                dtype: dt.value(i).to_string(),
+                shape: list_values::<Int32Array, i32>(shape, i),
+                data: lat.value(i).to_vec(),
+            });
+            let action =
+                (!act.is_null(i)).then(|| list_values::<deltalake::arrow::array::Float32Array, f32>(act, i));
+            out.insert(
+                (ids.value(i).to_string(), idx.value(i)),
+                Imagined {
+                    image: Image {
+                        format: "png",
+                        data: img.value(i).to_vec(),
+                    },
+                    latent,
+                    action,
+                },
+            );
+        }
+    }
+    Ok(out)
+}
+
+fn list_values<A, T>(l: &ListArray, i: usize) -> Vec<T>
+where
+    A: Array + 'static,
+    for<'a> &'a A: IntoIterator<Item = Option<T>>,
+{
+    let v = l.value(i);
+    v.as_any()
+        .downcast_ref::<A>()
+        .map(|a| a.into_iter().flatten().collect())
+        .unwrap_or_default()
+}

@@ -1,0 +1,433 @@
+//! The real `milv-export` binary on a small dataset built in-process: milv-sim's paired
+//! clips, `state` alignments, imagined rows (PNG frames, f16 latents, actions), a scoring
+//! run and a curation. The MCAP files are read back with our reader and compared bit for
+//! bit with the tables; bad selections fail clearly and leave no file.
+#![allow(clippy::unwrap_used)]
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use milv_align::{AlignOptions, align_dataset, features};
+use milv_data::arrow::array::{Array, BinaryArray, Float32Array, Int32Array, ListArray, StringArray};
+use milv_data::frame_codec::{FrameEncoding, encode};
+use milv_data::{
+    CommitMeta, Dataset, Episode, FrameRows, ImaginedRow, ImaginedRows, ShardOptions, TableKind,
+};
+use milv_mcap::{Recording, schema};
+use milv_score::{CurateOptions, Rule, RunOptions, Source, curate, score_dataset};
+use milv_sim::env::{Task, paired_clips};
+use milv_sim::shapes;
+use rand::SeedableRng;
+
+const SIZE: u32 = 32;
+const MODEL: &str = "acg-00112233aabbccdd";
+
+fn meta() -> CommitMeta {
+    CommitMeta::for_this_process("milv-export-test", "fixture")
+}
+
+fn episode(id: &str, domain: &str, pair: &str, n: usize) -> Episode {
+    Episode {
+        episode_id: id.into(),
+        domain: domain.into(),
+        kind: "paired".into(),
+        task_id: Some("draw/x".into()),
+        task_family: Some("drawing".into()),
+        pair_id: Some(pair.into()),
+        split: "train".into(),
+        n_frames: n as i64,
+        fps: 10.0,
+        width: SIZE as i32,
+        height: SIZE as i32,
+        frame_encoding: "png".into(),
+        action_dim: Some(2),
+        state_dim: Some(2),
+        action_names: Some(vec!["dx".into(), "dy".into()]),
+        state_names: None,
+        source_uri: format!("{id}.mp4"),
+        source_sha256: "00".into(),
+        sidecar_uri: None,
+        duration_ns: n as i64 * 100_000_000,
+        ingested_at_us: 0,
+    }
+}
+
+fn png(rgb: &[u8]) -> Vec<u8> {
+    let mut out = Vec::new();
+    encode(FrameEncoding::Png, rgb, SIZE, SIZE, &mut out).unwrap();
+    out
+}
+
+/// Two pairs of clips, aligned, translated by a made-up model, scored and curated.
+fn dataset(dir: &Path) -> PathBuf {
+    let root = dir.join("ds");
+    let ds = Dataset::open_or_create(&root, meta()).unwrap();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+    let shapes = shapes::training_shapes();
+    let mut txn = ds.begin(meta()).unwrap();
+    let mut w = txn
+        .shard_writer(TableKind::Frames, ShardOptions::default())
+        .unwrap();
+    let (mut eps, mut clips) = (Vec::new(), Vec::new());
+    for (i, shape) in shapes.iter().take(2).enumerate() {
+        let task = Task::Drawing { shape: shape.clone() };
+        let pair = paired_clips(&task, SIZE, 12, 9, &mut rng).unwrap();
+        for (domain, r) in [("human", &pair.human), ("robot", &pair.robot)] {
+            let id = format!("{domain}_{i}");
+            w.begin_episode().unwrap();
+            let mut rows = FrameRows::new();
+            for (k, f) in r.frames.iter().enumerate() {
+                rows.push(
+                    &id,
+                    k as i32,
+                    k as i64 * 100_000_000,
+                    &png(f),
+                    Some(&r.actions[k]),
+                    Some(&r.states[k]),
+                );
+            }
+            w.push(rows.finish().unwrap()).unwrap();
+            w.end_episode().unwrap();
+            eps.push(episode(&id, domain, &format!("pair-{i}"), r.frames.len()));
+        }
+        clips.push(pair);
+    }
+    let ids: Vec<String> = eps.iter().map(|e| e.episode_id.clone()).collect();
+    txn.add_files(TableKind::Frames, w.finish().unwrap(), ids.clone());
+    let mut ew = txn
+        .shard_writer(TableKind::Episodes, ShardOptions::default())
+        .unwrap();
+    ew.begin_episode().unwrap();
+    ew.push(milv_data::episodes_to_batch(&eps).unwrap()).unwrap();
+    ew.end_episode().unwrap();
+    txn.add_files(TableKind::Episodes, ew.finish().unwrap(), ids);
+    txn.commit().unwrap();
+    align_dataset(
+        &ds,
+        None,
+        features::by_name("state").unwrap(),
+        &AlignOptions::default(),
+        meta(),
+        &|| {},
+    )
+    .unwrap();
+
+    // The "translation": the robot clip's frame, a latent and an action that differ per frame.
+    let mut m = meta();
+    m.summary = serde_json::json!({"model_id": MODEL, "model_config": {"image_size": SIZE}});
+    let mut txn = ds.begin(m).unwrap();
+    let mut w = txn
+        .shard_writer(TableKind::Imagined, ShardOptions::default())
+        .unwrap();
+    let mut ids = Vec::new();
+    for (i, pair) in clips.iter().enumerate() {
+        let id = format!("human_{i}");
+        w.begin_episode().unwrap();
+        let mut rows = ImaginedRows::new();
+        for k in 0..pair.human.frames.len() {
+            let img = png(&pair.robot.frames[pair.human_to_robot[k]]);
+            let latent: Vec<u8> = (0..4 * 4 * 4)
+                .flat_map(|j| half_bits((j as f32 * 0.37 + k as f32 * 1.1 + i as f32).sin()))
+                .collect();
+            let action = [0.1 * k as f32 + 0.3, -0.7 * k as f32 / 3.0];
+            rows.push(&ImaginedRow {
+                episode_id: &id,
+                frame_index: k as i32,
+                timestamp_ns: k as i64 * 100_000_000,
+                model_id: MODEL,
+                image: &img,
+                latent: Some((&latent, "f16", &[4, 4, 4])),
+                action: Some(&action),
+            });
+        }
+        w.push(rows.finish().unwrap()).unwrap();
+        w.end_episode().unwrap();
+        ids.push(id);
+    }
+    txn.add_files(TableKind::Imagined, w.finish().unwrap(), ids);
+    txn.commit().unwrap();
+    let opts = RunOptions {
+        source: Source::Imagined,
+        model_id: None,
+        episodes: None,
+        domain: None,
+        jobs: 1,
+        partition: None,
+        skip_bad: false,
+    };
+    score_dataset(&ds, None, &opts, meta(), &|_| {}).unwrap();
+    let c = CurateOptions {
+        run_id: None,
+        rule: Rule::TopFraction(0.8),
+        min_episode_fraction: 0.0,
+    };
+    curate(&ds, &c, meta()).unwrap();
+    root
+}
+
+/// f32 → IEEE half (round to nearest even), little-endian; independent of milv-data's reader.
+fn half_bits(x: f32) -> [u8; 2] {
+    let b = x.to_bits();
+    let sign = ((b >> 16) & 0x8000) as u16;
+    let exp = ((b >> 23) & 0xff) as i32 - 127 + 15;
+    let man = b & 0x7f_ffff;
+    let h = if exp <= 0 {
+        sign // |x| < 2^-14: flush to zero is fine for these test values
+    } else {
+        let mut h = (exp as u32) << 10 | (man >> 13);
+        let rest = man & 0x1fff;
+        if rest > 0x1000 || (rest == 0x1000 && h & 1 == 1) {
+            h += 1;
+        }
+        sign | h as u16
+    };
+    h.to_le_bytes()
+}
+
+fn export(args: &[&str]) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_milv-export"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+fn ok_json(args: &[&str]) -> serde_json::Value {
+    let o = export(args);
+    assert!(
+        o.status.success(),
+        "{args:?}: {}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    serde_json::from_slice(&o.stdout).unwrap()
+}
+
+type Key = (String, i32);
+/// Latent bytes, dtype, shape and action of one imagined row.
+type Row = (Vec<u8>, String, Vec<i32>, Vec<f32>);
+
+/// (latent bytes, dtype, shape, action) per frame, straight from the imagined table.
+fn imagined_table(root: &Path) -> BTreeMap<Key, Row> {
+    let ds = Dataset::open(root).unwrap();
+    let v = ds.latest_version().unwrap();
+    let mut out = BTreeMap::new();
+    for b in ds.scan(TableKind::Imagined, v, None).unwrap() {
+        let b = b.unwrap();
+        let col = |n: &str| b.column_by_name(n).unwrap().clone();
+        let (ids, idx) = (col("episode_id"), col("frame_index"));
+        let ids = ids.as_any().downcast_ref::<StringArray>().unwrap();
+        let idx = idx.as_any().downcast_ref::<Int32Array>().unwrap();
+        let (lat, dt, sh, act) = (
+            col("latent"),
+            col("latent_dtype"),
+            col("latent_shape"),
+            col("action"),
+        );
+        let lat = lat.as_any().downcast_ref::<BinaryArray>().unwrap();
+        let dt = dt.as_any().downcast_ref::<StringArray>().unwrap();
+        let sh = sh.as_any().downcast_ref::<ListArray>().unwrap();
+        let act = act.as_any().downcast_ref::<ListArray>().unwrap();
+        for i in 0..b.num_rows() {
+            let shape = sh
+                .value(i)
+                .as_any()
+                .downcast_ref::<Int32Array>()
+                .unwrap()
+                .values()
+                .to_vec();
+            let a = act
+                .value(i)
+                .as_any()
+                .downcast_ref::<Float32Array>()
+                .unwrap()
+                .values()
+                .to_vec();
+            out.insert(
+                (ids.value(i).to_string(), idx.value(i)),
+                (lat.value(i).to_vec(), dt.value(i).to_string(), shape, a),
+            );
+        }
+    }
+    out
+}
+
+#[test]
+fn mcap_round_trips_every_latent_and_action_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dataset(dir.path());
+    let out = dir.path().join("all.mcap");
+    let rep = ok_json(&[
+        "mcap",
+        root.to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(rep["model_id"], MODEL);
+    let rec = Recording::read(&out).unwrap();
+    let table = imagined_table(&root);
+    let latents: Vec<_> = rec.topic(schema::IMAGINED_LATENT).collect();
+    assert_eq!(latents.len(), table.len());
+    for m in &latents {
+        let t = m.tensor().unwrap();
+        let (data, dtype, shape, _) = &table[&(t.episode_id.clone(), t.frame_index)];
+        assert_eq!(&t.data, data);
+        assert_eq!(&t.dtype, dtype);
+        assert_eq!(t.shape, shape.iter().map(|d| *d as u32).collect::<Vec<_>>());
+        assert_eq!(t.model_id, MODEL);
+    }
+    let actions: Vec<_> = rec.topic(schema::IMAGINED_ACTION).collect();
+    assert_eq!(actions.len(), table.len());
+    for m in actions {
+        let j = m.json().unwrap();
+        let key = (
+            j["episode_id"].as_str().unwrap().to_string(),
+            j["frame_index"].as_i64().unwrap() as i32,
+        );
+        let want = &table[&key].3;
+        let got = [j["dx"].as_f64().unwrap() as f32, j["dy"].as_f64().unwrap() as f32];
+        assert_eq!(
+            got.map(f32::to_bits),
+            [want[0].to_bits(), want[1].to_bits()],
+            "{key:?}"
+        );
+    }
+    // Every human frame has its aligned robot frame and true action, and quality.
+    let n = table.len() as u64;
+    for t in [
+        schema::HUMAN_IMAGE,
+        schema::IMAGINED_IMAGE,
+        schema::ROBOT_IMAGE,
+        schema::ROBOT_ACTION,
+        schema::QUALITY,
+    ] {
+        assert_eq!(rec.stats[t], n, "{t}");
+        assert_eq!(rec.topic(t).count() as u64, n, "{t}");
+    }
+    let img = rec.topic(schema::ROBOT_IMAGE).next().unwrap().image().unwrap();
+    assert_eq!((img.format.as_str(), &img.data[..4]), ("png", &b"\x89PNG"[..]));
+    // Episodes end to end: log times never go back.
+    let times: Vec<u64> = rec.topic(schema::HUMAN_IMAGE).map(|m| m.log_time).collect();
+    assert!(times.windows(2).all(|w| w[0] < w[1]));
+    let q = rec.topic(schema::QUALITY).next().unwrap().json().unwrap();
+    assert!(q["beta"].is_number() && q["weight"].is_number());
+    let milv = rec.metadata("milv").unwrap();
+    assert_eq!(milv["model_id"], MODEL);
+    assert_eq!(milv["dataset_version"], rep["version"].to_string());
+    assert_eq!(rec.metadata.iter().filter(|(n, _)| n == "episode").count(), 2);
+    assert_eq!(rec.attachments[0].0, "model_config.json");
+
+    // One file per episode, each with its own timestamps.
+    let per = dir.path().join("per");
+    let rep = ok_json(&[
+        "mcap",
+        root.to_str().unwrap(),
+        "--per-episode",
+        "-o",
+        per.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(rep["files"].as_array().unwrap().len(), 2);
+    let one = Recording::read(&per.join("human_1.mcap")).unwrap();
+    assert_eq!(one.topic(schema::HUMAN_IMAGE).next().unwrap().log_time, 0);
+
+    // Worst β first in the rerun export; a robot episode on its own gets its own frames.
+    let rrd = dir.path().join("all.rrd");
+    let rep = ok_json(&[
+        "rerun",
+        root.to_str().unwrap(),
+        "--sort",
+        "beta",
+        "-o",
+        rrd.to_str().unwrap(),
+        "--json",
+    ]);
+    assert_eq!(rep["logged"]["frames"].as_u64().unwrap(), n);
+    assert!(std::fs::metadata(&rrd).unwrap().len() > 0);
+    let robot = dir.path().join("robot.mcap");
+    ok_json(&[
+        "mcap",
+        root.to_str().unwrap(),
+        "--episodes",
+        "robot_0",
+        "-o",
+        robot.to_str().unwrap(),
+        "--json",
+    ]);
+    let r = Recording::read(&robot).unwrap();
+    assert_eq!(r.stats[schema::ROBOT_ACTION], r.stats[schema::ROBOT_IMAGE]);
+    assert_eq!(r.stats[schema::HUMAN_IMAGE], 0);
+}
+
+#[test]
+fn bad_selections_fail_clearly_and_leave_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dataset(dir.path());
+    let r = root.to_str().unwrap();
+    let out = dir.path().join("x.mcap");
+    let o = out.to_str().unwrap();
+    let missing_dir = dir.path().join("no/such/dir/x.mcap");
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (
+            vec!["mcap", r, "--model-id", "acg-nope", "-o", o],
+            "model acg-nope has no rows",
+        ),
+        (vec!["mcap", r, "--episodes", "nope", "-o", o], "no episode nope"),
+        (
+            vec!["mcap", r, "--episodes", "robot_0,human_9", "-o", o],
+            "no episode human_9",
+        ),
+        (
+            vec!["mcap", r, "-o", missing_dir.to_str().unwrap()],
+            "no/such/dir",
+        ),
+        (vec!["rerun", r, "--model-id", "acg-nope", "-o", o], "acg-nope"),
+    ];
+    for (args, needle) in cases {
+        let p = export(&args);
+        let err = String::from_utf8_lossy(&p.stderr);
+        assert_eq!(p.status.code(), Some(1), "{args:?}");
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert!(
+        !out.exists() && left.iter().all(|n| !n.to_string_lossy().ends_with(".tmp")),
+        "{left:?}"
+    );
+}
+
+#[test]
+fn a_human_episode_without_imagined_rows_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dataset(dir.path());
+    // A third human episode the model never translated.
+    let ds = Dataset::open(&root).unwrap();
+    let mut txn = ds.begin(meta()).unwrap();
+    let mut ew = txn
+        .shard_writer(TableKind::Episodes, ShardOptions::default())
+        .unwrap();
+    ew.begin_episode().unwrap();
+    ew.push(milv_data::episodes_to_batch(&[episode("human_new", "human", "pair-9", 3)]).unwrap())
+        .unwrap();
+    ew.end_episode().unwrap();
+    txn.add_files(
+        TableKind::Episodes,
+        ew.finish().unwrap(),
+        vec!["human_new".into()],
+    );
+    txn.commit().unwrap();
+    let out = dir.path().join("x.mcap");
+    let p = export(&[
+        "mcap",
+        root.to_str().unwrap(),
+        "--episodes",
+        "human_new",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(String::from_utf8_lossy(&p.stderr).contains("episode human_new has no imagined rows"));
+    assert!(!out.exists());
+}
