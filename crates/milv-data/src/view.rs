@@ -686,3 +686,43 @@ where
         .map(|a| a.into_iter().flatten().collect())
         .unwrap_or_default()
 }
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::Latent;
+
+    fn latent(dtype: &str, shape: &[i32], bytes: usize) -> Latent {
+        Latent {
+            dtype: dtype.into(),
+            shape: shape.to_vec(),
+            data: vec![0; bytes],
+        }
+    }
+
+    #[test]
+    fn latents_must_match_their_shape() {
+        assert!(latent("f16", &[2, 3, 4], 48).check().is_ok());
+        let e = latent("f16", &[2, 3, 4], 47).check().unwrap_err();
+        assert!(e.contains("47 bytes, expected 48"), "{e}");
+        assert!(
+            latent("f32", &[2, 0, 4], 0)
+                .check()
+                .unwrap_err()
+                .contains("non-positive")
+        );
+        assert!(
+            latent("i8", &[1], 1)
+                .check()
+                .unwrap_err()
+                .contains("unknown latent dtype")
+        );
+        // 1.0 and -2.0 in f16, little-endian.
+        let l = Latent {
+            dtype: "f16".into(),
+            shape: vec![2],
+            data: vec![0x00, 0x3c, 0x00, 0xc0],
+        };
+        assert_eq!(l.to_f32().unwrap(), vec![1.0, -2.0]);
+    }
+}

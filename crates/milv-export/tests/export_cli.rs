@@ -431,3 +431,61 @@ fn a_human_episode_without_imagined_rows_is_an_error() {
     assert!(String::from_utf8_lossy(&p.stderr).contains("episode human_new has no imagined rows"));
     assert!(!out.exists());
 }
+
+#[test]
+fn a_latent_that_does_not_match_its_shape_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dataset(dir.path());
+    let ds = Dataset::open(&root).unwrap();
+    let mut txn = ds.begin(meta()).unwrap();
+    let mut w = txn
+        .shard_writer(TableKind::Imagined, ShardOptions::default())
+        .unwrap();
+    w.begin_episode().unwrap();
+    let mut rows = ImaginedRows::new();
+    let img = png(&vec![0; (SIZE * SIZE * 3) as usize]);
+    for k in 0..2 {
+        rows.push(&ImaginedRow {
+            episode_id: "human_0",
+            frame_index: k,
+            timestamp_ns: i64::from(k) * 100_000_000,
+            model_id: "acg-bad",
+            image: &img,
+            // 63 values where the shape says 64.
+            latent: Some((&[0u8; 126], "f16", &[4, 4, 4])),
+            action: Some(&[0.0, 0.0]),
+        });
+    }
+    w.push(rows.finish().unwrap()).unwrap();
+    w.end_episode().unwrap();
+    txn.add_files(TableKind::Imagined, w.finish().unwrap(), vec!["human_0".into()]);
+    txn.commit().unwrap();
+    for cmd in ["mcap", "rerun"] {
+        let out = dir.path().join(format!("x.{cmd}"));
+        let p = export(&[
+            cmd,
+            root.to_str().unwrap(),
+            "--model-id",
+            "acg-bad",
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&p.stderr);
+        assert_eq!(p.status.code(), Some(1), "{cmd}: {err}");
+        assert!(
+            err.contains(
+                "episode human_0 frame 0: latent of shape [4, 4, 4] (f16) has 126 bytes, expected 128"
+            ),
+            "{err}"
+        );
+        assert!(!out.exists());
+    }
+    let left: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name())
+        .collect();
+    assert!(
+        left.iter().all(|n| !n.to_string_lossy().ends_with(".tmp")),
+        "{left:?}"
+    );
+}
