@@ -77,13 +77,15 @@ pub fn temp_file_beside(out: &std::path::Path) -> Result<tempfile::NamedTempFile
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
-    tempfile::Builder::new()
-        .prefix(&format!(".{name}."))
-        .suffix(".tmp")
-        .tempfile_in(&dir)
-        .map_err(|source| Error::Io {
-            op: "cannot create the output file in",
-            source,
-            path: dir,
-        })
+    let mut b = tempfile::Builder::new();
+    let prefix = format!(".{name}.");
+    b.prefix(&prefix).suffix(".tmp");
+    // The file becomes the output: the mode of an ordinary new file, not tempfile's 0600.
+    #[cfg(unix)]
+    b.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o644));
+    b.tempfile_in(&dir).map_err(|source| Error::Io {
+        op: "cannot create the output file in",
+        source,
+        path: dir,
+    })
 }
