@@ -160,6 +160,17 @@ pub struct EpisodeView {
 }
 
 impl EpisodeView {
+    /// Span of the episode on a timeline: its last timestamp plus one frame period, where
+    /// the next episode starts when episodes are laid end to end.
+    pub fn duration_ns(&self) -> u64 {
+        let period = if self.episode.fps > 0.0 {
+            (1e9 / self.episode.fps) as u64
+        } else {
+            0
+        };
+        self.frames.last().map_or(0, |f| f.timestamp_ns.max(0) as u64) + period
+    }
+
     /// Mean β over the frames that have one.
     pub fn mean_beta(&self) -> Option<f64> {
         mean(self.frames.iter().filter_map(|f| f.quality.map(|q| q.beta)))
@@ -365,16 +376,17 @@ impl ViewPlan {
 
     /// Puts the episodes with the lowest mean β first (those without scores last).
     pub fn sort_by_beta(&mut self) {
+        // One pass over the scores: (sum, count) of β per episode.
+        let mut sums: HashMap<&str, (f64, usize)> = HashMap::new();
+        for ((id, _), q) in &self.quality {
+            let s = sums.entry(id.as_str()).or_default();
+            *s = (s.0 + q.beta, s.1 + 1);
+        }
         let beta = |e: &Episode| {
-            mean(
-                self.quality
-                    .iter()
-                    .filter(|((id, _), _)| id == &e.episode_id)
-                    .map(|(_, q)| q.beta),
-            )
-            .unwrap_or(f64::INFINITY)
+            sums.get(e.episode_id.as_str())
+                .map_or(f64::INFINITY, |(s, n)| s / *n as f64)
         };
-        let mut keyed: Vec<(f64, Episode)> = self.episodes.drain(..).map(|e| (beta(&e), e)).collect();
+        let mut keyed: Vec<(f64, Episode)> = self.episodes.iter().map(|e| (beta(e), e.clone())).collect();
         keyed.sort_by(|a, b| a.0.total_cmp(&b.0));
         self.episodes = keyed.into_iter().map(|(_, e)| e).collect();
     }
@@ -504,6 +516,11 @@ fn viewable((enc, w, h): (FrameEncoding, u32, u32), bytes: &[u8], id: &str) -> R
             Ok(Image { format: "png", data })
         }
     }
+}
+
+/// Name of action component `i`: the dataset's name, or `a<i>` past the named ones.
+pub fn component_name(names: &[String], i: usize) -> String {
+    names.get(i).cloned().unwrap_or_else(|| format!("a{i}"))
 }
 
 fn action_names(all: &[Episode]) -> Vec<String> {

@@ -232,11 +232,7 @@ impl<W: Write + Seek> Recorder<W> {
         m.insert("episode_id".into(), ep.into());
         m.insert("frame_index".into(), frame.into());
         for (i, v) in a.iter().enumerate() {
-            let name = self
-                .action_names
-                .get(i)
-                .cloned()
-                .unwrap_or_else(|| format!("a{i}"));
+            let name = milv_data::view::component_name(&self.action_names, i);
             // f32 → JSON number: the shortest text that parses back to the same f32.
             m.insert(name, json!(v));
         }
@@ -296,9 +292,7 @@ impl<W: Write + Seek> Recorder<W> {
                 }
             }
         }
-        let period = if e.fps > 0.0 { (1e9 / e.fps) as u64 } else { 0 };
-        let last = ev.frames.last().map_or(0, |f| f.timestamp_ns.max(0) as u64);
-        let end = offset_ns + last + period;
+        let end = offset_ns + ev.duration_ns();
         let meta = BTreeMap::from([
             ("episode_id".to_string(), id.to_string()),
             ("domain".to_string(), e.domain.clone()),

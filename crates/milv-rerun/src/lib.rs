@@ -157,11 +157,7 @@ impl Logger {
 
     fn actions(&self, kind: &str, a: &[f32]) -> Result<()> {
         for (i, v) in a.iter().enumerate() {
-            let name = self
-                .action_names
-                .get(i)
-                .cloned()
-                .unwrap_or_else(|| format!("a{i}"));
+            let name = milv_data::view::component_name(&self.action_names, i);
             self.scalar(&format!("action/{kind}/{name}"), f64::from(*v))?;
         }
         Ok(())
@@ -229,8 +225,7 @@ impl Logger {
             }
             self.frame += 1;
         }
-        let period = if e.fps > 0.0 { (1e9 / e.fps) as u64 } else { 0 };
-        self.offset_ns += ev.frames.last().map_or(0, |f| f.timestamp_ns.max(0) as u64) + period;
+        self.offset_ns += ev.duration_ns();
         Ok(ev.frames.len())
     }
 }
