@@ -9,12 +9,13 @@
 # matter here; latents are 64x32x32 f16 as in real runs), scored and curated.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
-episodes=10 repeats=3 work=target/bench-mcap
+# Absolute paths: cargo runs benches from the package folder.
+episodes=10 repeats=3 work=$PWD/target/bench-mcap
 while [ $# -gt 0 ]; do
   case $1 in
     --episodes) episodes=$2; shift 2 ;;
     --repeats) repeats=$2; shift 2 ;;
-    --work) work=$2; shift 2 ;;
+    --work) work=$(realpath -m "$2"); shift 2 ;;
     *) echo "unknown argument $1" >&2; exit 2 ;;
   esac
 done

@@ -404,6 +404,37 @@ impl ViewPlan {
         })
     }
 
+    /// [`ViewPlan::views`] with the reading on a second thread, so reading the tables and
+    /// consuming the views (an exporter's encoding and compression) overlap. `f` gets each
+    /// view with its position; the first error (a read's or `f`'s) stops both sides.
+    pub fn for_each_prefetched<E: From<Error> + Send>(
+        &mut self,
+        ds: &Dataset,
+        mut f: impl FnMut(usize, EpisodeView) -> std::result::Result<(), E>,
+    ) -> std::result::Result<(), E> {
+        std::thread::scope(|s| {
+            // Two groups ahead at most: memory stays bounded by a few groups' frames.
+            let (tx, rx) = std::sync::mpsc::sync_channel::<Result<EpisodeView>>(2 * self.group);
+            let reader = s.spawn(move || {
+                for ev in self.views(ds) {
+                    if tx.send(ev).is_err() {
+                        break;
+                    }
+                }
+            });
+            let mut out = Ok(());
+            for (k, ev) in rx.iter().enumerate() {
+                if let Err(e) = ev.map_err(E::from).and_then(|ev| f(k, ev)) {
+                    out = Err(e);
+                    break;
+                }
+            }
+            drop(rx);
+            let _ = reader.join();
+            out
+        })
+    }
+
     fn load(&mut self, ds: &Dataset, group: &[Episode]) -> Result<Vec<EpisodeView>> {
         let v = self.version;
         let mut wanted: BTreeSet<String> = group.iter().map(|e| e.episode_id.clone()).collect();

@@ -54,29 +54,40 @@ pub fn model_id(dir: &Path) -> Result<String> {
 
 /// Writes `run`'s checkpoint as `dir/step-NNNNNNNN` and returns that folder.
 pub fn save(run: &ACycleGan, data: &DataRef, dir: &Path) -> Result<PathBuf> {
+    write_dir(dir, &format!("step-{:08}", run.step), &mut |tmp| {
+        run.nets.save(tmp)?;
+        let state = run.state();
+        Tensor::write_safetensors(&state, tmp.join("state.safetensors"))?;
+        let meta = CheckpointMeta {
+            format: FORMAT.into(),
+            step: run.step,
+            model: run.model.clone(),
+            train: run.train.clone(),
+            data: data.clone(),
+            model_id: model_id(tmp)?,
+            tool_version: milv_data::TOOL_VERSION.into(),
+        };
+        write_json(&tmp.join("checkpoint.json"), &meta)
+    })
+}
+
+/// Pretty JSON to `path`.
+pub fn write_json(path: &Path, v: &impl Serialize) -> Result<()> {
+    let json = serde_json::to_vec_pretty(v).map_err(|e| Error::Checkpoint(e.to_string()))?;
+    std::fs::write(path, json).map_err(|e| Error::io(path, e))
+}
+
+/// Fills `dir/.NAME.tmp` with `fill`, syncs its files and renames it to `dir/NAME`
+/// (replacing an older one), so a crash never leaves a half folder that looks whole.
+pub fn write_dir(dir: &Path, name: &str, fill: &mut dyn FnMut(&Path) -> Result<()>) -> Result<PathBuf> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    let name = format!("step-{:08}", run.step);
     let tmp = dir.join(format!(".{name}.tmp"));
-    let fin = dir.join(&name);
+    let fin = dir.join(name);
     if tmp.exists() {
         std::fs::remove_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
     }
     std::fs::create_dir_all(&tmp).map_err(|e| Error::io(&tmp, e))?;
-    run.nets.save(&tmp)?;
-    let state = run.state();
-    Tensor::write_safetensors(&state, tmp.join("state.safetensors"))?;
-    let meta = CheckpointMeta {
-        format: FORMAT.into(),
-        step: run.step,
-        model: run.model.clone(),
-        train: run.train.clone(),
-        data: data.clone(),
-        model_id: model_id(&tmp)?,
-        tool_version: milv_data::TOOL_VERSION.into(),
-    };
-    let json = serde_json::to_vec_pretty(&meta).map_err(|e| Error::Checkpoint(e.to_string()))?;
-    let cj = tmp.join("checkpoint.json");
-    std::fs::write(&cj, json).map_err(|e| Error::io(&cj, e))?;
+    fill(&tmp)?;
     for f in std::fs::read_dir(&tmp).map_err(|e| Error::io(&tmp, e))?.flatten() {
         std::fs::File::open(f.path())
             .and_then(|h| h.sync_all())
@@ -138,13 +149,19 @@ pub fn load(dir: &Path, device: Device) -> Result<(ACycleGan, CheckpointMeta)> {
 
 /// The newest complete checkpoint under `dir` (a run's `checkpoints/`), if any.
 pub fn latest(dir: &Path) -> Result<Option<PathBuf>> {
+    latest_with(dir, "checkpoint.json")
+}
+
+/// The newest `step-N` folder under `dir` that holds `marker` (written last, so its
+/// presence means the folder is complete).
+pub fn latest_with(dir: &Path, marker: &str) -> Result<Option<PathBuf>> {
     if !dir.is_dir() {
         return Ok(None);
     }
     let mut names: Vec<String> = std::fs::read_dir(dir)
         .map_err(|e| Error::io(dir, e))?
         .flatten()
-        .filter(|e| e.path().join("checkpoint.json").is_file())
+        .filter(|e| e.path().join(marker).is_file())
         .map(|e| e.file_name().to_string_lossy().into_owned())
         .filter(|n| n.starts_with("step-"))
         .collect();

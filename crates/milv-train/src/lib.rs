@@ -1,7 +1,7 @@
-//! # milv-train — A-CycleGAN with inverse dynamics, and translation into imagined data
+//! # milv-train — A-CycleGAN, imagined data, DAML/MILV meta-policies, one-shot evaluation
 //!
-//! The learning half of MILV (paper section 4.1, Appendix A.2), on `tch` (libtorch from
-//! the PyPI `torch` wheel). Only this crate links libtorch.
+//! The learning half of MILV (paper sections 4.1 and 4.2, Appendix A.2), on `tch`
+//! (libtorch from the PyPI `torch` wheel). Only this crate links libtorch.
 //!
 //! | module | what |
 //! |---|---|
@@ -15,6 +15,10 @@
 //! | [`train`] | the training loop: progress, JSON-lines losses, translation grids, checkpoints, resume |
 //! | [`translate`] | human episodes → the `imagined` table (frames, f16 latents, actions) |
 //! | [`eval`] | SSIM of translations against ground-truth robot renderings, π_I's action error |
+//! | [`meta`] | the meta-policy (θ with pre- and post-update heads, the learned loss L_ψ), the second-order meta step, [`meta::Variant`] |
+//! | [`meta_data`] | per-task inner/outer sequences of each variant from a pinned version |
+//! | [`meta_train`] | the meta-training loop, policy checkpoints, the meta-step benchmark |
+//! | [`oneshot`] | one-shot evaluation in milv-sim, Wilson intervals, the success tables |
 //! | [`device`] | `cpu` / `cuda` / `auto` |
 
 pub mod adam;
@@ -24,7 +28,11 @@ pub mod cyclegan;
 pub mod data;
 pub mod device;
 pub mod eval;
+pub mod meta;
+pub mod meta_data;
+pub mod meta_train;
 pub mod nets;
+pub mod oneshot;
 pub mod pool;
 pub mod train;
 pub mod translate;

@@ -4,8 +4,8 @@
 //!
 //! Images are `[B, 3, S, S]` in [-1, 1]; latents `[B, C, S/4, S/4]`.
 
+use tch::Tensor;
 use tch::nn::{self, Module};
-use tch::{Kind, Tensor};
 
 use crate::config::ModelConfig;
 
@@ -198,12 +198,13 @@ impl LeakyRelu for Tensor {
 /// `[B, C, H, W]` → `[B, 2C]` (Levine et al.'s spatial softmax).
 pub fn spatial_softmax(x: &Tensor) -> Tensor {
     let (b, c, h, w) = x.size4().unwrap_or((1, 1, 1, 1));
-    let p = x.view([b, c, h * w]).softmax(-1, Kind::Float).view([b, c, h, w]);
-    let opts = (Kind::Float, x.device());
+    let k = x.kind();
+    let p = x.view([b, c, h * w]).softmax(-1, k).view([b, c, h, w]);
+    let opts = (k, x.device());
     let xs = Tensor::linspace(-1.0, 1.0, w, opts).view([1, 1, 1, w]);
     let ys = Tensor::linspace(-1.0, 1.0, h, opts).view([1, 1, h, 1]);
-    let ex = (&p * xs).sum_dim_intlist([2i64, 3].as_slice(), false, Kind::Float);
-    let ey = (&p * ys).sum_dim_intlist([2i64, 3].as_slice(), false, Kind::Float);
+    let ex = (&p * xs).sum_dim_intlist([2i64, 3].as_slice(), false, k);
+    let ey = (&p * ys).sum_dim_intlist([2i64, 3].as_slice(), false, k);
     Tensor::cat(&[ex, ey], 1)
 }
 
@@ -249,7 +250,7 @@ impl InverseDynamics {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use tch::Device;
+    use tch::{Device, Kind};
 
     #[test]
     fn every_net_has_the_documented_shapes() {

@@ -70,7 +70,7 @@ pub struct TrainReport {
     pub eval: Option<EvalReport>,
 }
 
-fn append_json(path: &Path, v: &impl Serialize) -> Result<()> {
+pub(crate) fn append_json(path: &Path, v: &impl Serialize) -> Result<()> {
     let mut f = std::fs::OpenOptions::new()
         .create(true)
         .append(true)

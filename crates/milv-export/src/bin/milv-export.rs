@@ -81,6 +81,13 @@ enum Cmd {
         /// Write uncompressed chunks instead of zstd.
         #[arg(long)]
         no_compression: bool,
+        /// zstd level (1 fastest … 19; 0 is zstd's default, 3).
+        #[arg(long, default_value_t = 0)]
+        zstd_level: u32,
+        /// zstd worker threads (0: compress on the writing thread, which already overlaps
+        /// with reading the tables).
+        #[arg(long, default_value_t = 0)]
+        zstd_threads: u32,
     },
     /// Writes a Rerun recording (.rrd), or streams it to a new or running viewer, with a
     /// layout that opens on the images side by side and the quality and action plots below.
@@ -129,6 +136,8 @@ fn run(cli: Cli) -> anyhow::Result<u8> {
             out,
             per_episode,
             no_compression,
+            zstd_level,
+            zstd_threads,
         } => {
             let (ds, mut plan) = plan(&select)?;
             let info = RecordingInfo {
@@ -138,6 +147,8 @@ fn run(cli: Cli) -> anyhow::Result<u8> {
             };
             let opts = McapOptions {
                 compression: (!no_compression).then_some(milv_mcap::mcap::Compression::Zstd),
+                compression_level: zstd_level,
+                compression_threads: zstd_threads,
                 ..McapOptions::default()
             };
             let pb = cli::bar(plan.episodes.len() as u64, "episodes");

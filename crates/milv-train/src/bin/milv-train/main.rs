@@ -1,5 +1,8 @@
 //! `milv-train`: trains A-CycleGAN (with inverse dynamics) on a pinned dataset version,
-//! translates human episodes into the `imagined` table, and evaluates translations.
+//! translates human episodes into the `imagined` table, evaluates translations, trains
+//! DAML / MILV meta-policies and evaluates them one-shot in milv-sim.
+
+mod meta;
 
 use std::collections::BTreeSet;
 use std::path::PathBuf;
@@ -20,11 +23,19 @@ use milv_train::{ACycleGan, GanLoss, ModelConfig, TrainConfig, device};
 #[command(
     name = "milv-train",
     version,
-    about = "A-CycleGAN with inverse dynamics: train, translate human videos into imagined robot data, evaluate",
+    about = "A-CycleGAN, imagined robot data, DAML/MILV meta-policies and their one-shot evaluation",
     long_about = "Trains the paper's A-CycleGAN (G: human→robot, F: robot→human, PatchGAN \
 discriminators, the auxiliary loss on aligned pairs and the inverse-dynamics model π_I on F's \
 encoder) from a pinned dataset version; `translate` writes the imagined table (ŷ^r, ẑ^r, â^r) \
-that milv-score and the meta-learner read.\n\nExamples:\n  milv-train cyclegan ds@3 --out runs/acg --steps 5000\n  milv-train cyclegan ds@3 --out runs/acg --resume --steps 8000\n  milv-train translate ds --checkpoint runs/acg/checkpoints/step-00005000\n  milv-train eval ds --checkpoint runs/acg/checkpoints/step-00005000 --truth sim/ground_truth.jsonl"
+that milv-score and the meta-learner read. `meta` trains a meta-policy (DAML, MILV or an \
+ablation) from a pinned version; `eval` adapts it to ONE human video per trial of each held-out \
+task and runs it closed loop in milv-sim; `table` prints the paper's Tables 1 and 2.\n\nExamples:\n  \
+milv-train cyclegan ds@3 --out runs/acg --steps 5000\n  milv-train cyclegan ds@3 --out runs/acg --resume --steps 8000\n  \
+milv-train translate ds --checkpoint runs/acg/checkpoints/step-00005000\n  \
+milv-train eval-translation ds --checkpoint runs/acg/checkpoints/step-00005000 --truth sim/ground_truth.jsonl\n  \
+milv-train meta ds@7 --variant milv --translator runs/acg/checkpoints/step-00005000 --out runs/milv\n  \
+milv-train eval runs/milv --trials 10 --seeds 0,1 -o results/milv.json\n  \
+milv-train table results/*.json"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -32,7 +43,7 @@ struct Cli {
 }
 
 #[derive(clap::Args, Debug)]
-struct Runtime {
+pub(crate) struct Runtime {
     /// cpu | cuda | auto (CUDA when libtorch sees a GPU).
     #[arg(long, default_value = "cpu")]
     device: String,
@@ -45,7 +56,7 @@ struct Runtime {
 }
 
 impl Runtime {
-    fn apply(&self) -> anyhow::Result<tch::Device> {
+    pub(crate) fn apply(&self) -> anyhow::Result<tch::Device> {
         if let Some(t) = self.threads {
             tch::set_num_threads(t);
         }
@@ -60,7 +71,15 @@ enum Cmd {
     /// Translate human episodes with a checkpoint and commit the imagined table.
     Translate(TranslateArgs),
     /// SSIM of translations against ground-truth robot renderings, π_I's action error.
-    Eval(EvalArgs),
+    EvalTranslation(EvalArgs),
+    /// Meta-train a DAML / MILV / ablation policy (writes RUN/losses.jsonl, RUN/checkpoints/).
+    Meta(Box<meta::MetaArgs>),
+    /// One-shot success of a policy in milv-sim: one human video per trial, 50 robot steps.
+    Eval(meta::EvalArgs),
+    /// The paper's Tables 1 and 2 (Markdown) from `eval --out` reports.
+    Table(meta::TableArgs),
+    /// Time second-order meta steps on random data: the tool side of tools/bench/meta_step.py.
+    BenchMeta(meta::BenchMetaArgs),
     /// Time A-CycleGAN steps on random data (no dataset): the tool side of
     /// tools/bench/train_step.py.
     BenchStep(BenchArgs),
@@ -243,7 +262,11 @@ fn run(c: Cli) -> anyhow::Result<u8> {
     match c.cmd {
         Cmd::Cyclegan(a) => cmd_train(*a),
         Cmd::Translate(a) => cmd_translate(a),
-        Cmd::Eval(a) => cmd_eval(a),
+        Cmd::EvalTranslation(a) => cmd_eval(a),
+        Cmd::Meta(a) => meta::cmd_meta(*a),
+        Cmd::Eval(a) => meta::cmd_eval(a),
+        Cmd::Table(a) => meta::cmd_table(a),
+        Cmd::BenchMeta(a) => meta::cmd_bench_meta(a),
         Cmd::BenchStep(a) => cmd_bench(a),
         Cmd::BenchLoader(a) => cmd_bench_loader(a),
         Cmd::Report(a) => {

@@ -1,0 +1,437 @@
+//! The meta-learning subcommands: `meta` (train a DAML / MILV policy), `eval` (one-shot
+//! success in milv-sim), `table` (the paper's Tables 1 and 2 from eval reports) and
+//! `bench-meta`.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use milv_cli as cli;
+use milv_data::{Dataset, DatasetRef};
+use milv_train::checkpoint::{self, DataRef};
+use milv_train::meta::{Input, MetaConfig, MetaRun, PolicyConfig, Variant};
+use milv_train::meta_data::{MetaDataOptions, MetaSet};
+use milv_train::meta_train::{self, MetaRunOptions, PolicyMeta, Translator};
+use milv_train::oneshot::{self, EvalOptions, EvalRecord, Family, PolicyLearner};
+
+use crate::Runtime;
+
+#[derive(clap::Args, Debug)]
+pub struct MetaArgs {
+    /// DATASET or DATASET@VERSION (default: the latest version).
+    dataset: DatasetRef,
+    /// daml | milv | wstable | feedimg | degi.
+    #[arg(long)]
+    variant: Variant,
+    /// A-CycleGAN checkpoint whose imagined rows the policy trains on (all variants but
+    /// daml; degi needs a --decoupled one).
+    #[arg(long)]
+    translator: Option<PathBuf>,
+    /// Run folder.
+    #[arg(long)]
+    out: PathBuf,
+    /// Continue from the newest checkpoint in RUN/checkpoints.
+    #[arg(long)]
+    resume: bool,
+    /// Meta-train until this many steps in all.
+    #[arg(long, default_value_t = 1000)]
+    steps: u64,
+    /// Tasks per meta-batch.
+    #[arg(long, default_value_t = 4)]
+    meta_batch: usize,
+    /// Inner step size α.
+    #[arg(long, default_value_t = 0.01)]
+    alpha: f64,
+    /// Outer Adam learning rate.
+    #[arg(long, default_value_t = 1e-3)]
+    lr: f64,
+    /// First-order meta-gradient (ψ then learns nothing; for comparison only).
+    #[arg(long)]
+    first_order: bool,
+    /// Image size for daml without a translator (default: the dataset's frames).
+    #[arg(long)]
+    size: Option<u32>,
+    /// Scoring run whose curated weights to use (default: the newest over the model).
+    #[arg(long)]
+    score_run: Option<String>,
+    /// Small networks (tests).
+    #[arg(long)]
+    tiny: bool,
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    #[arg(long, default_value_t = 500)]
+    checkpoint_every: u64,
+    #[command(flatten)]
+    rt: Runtime,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct EvalArgs {
+    /// Policy checkpoint folder, or a meta run folder (its newest checkpoint).
+    policy: PathBuf,
+    /// drawing | pushing (default: the family the policy trained on).
+    #[arg(long)]
+    family: Option<Family>,
+    /// Trials per held-out task and seed.
+    #[arg(long, default_value_t = 10)]
+    trials: usize,
+    /// Evaluation seeds (comma-separated): each draws its own trial instances.
+    #[arg(long, value_delimiter = ',', default_value = "0")]
+    seeds: Vec<u64>,
+    /// Use this A-CycleGAN checkpoint instead of the one recorded in the policy.
+    #[arg(long)]
+    translator: Option<PathBuf>,
+    /// Also write the report (JSON) here.
+    #[arg(long, short)]
+    out: Option<PathBuf>,
+    #[command(flatten)]
+    rt: Runtime,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct TableArgs {
+    /// Reports written by `milv-train eval --out`.
+    #[arg(required = true)]
+    reports: Vec<PathBuf>,
+    /// Write the Markdown here too.
+    #[arg(long, short)]
+    out: Option<PathBuf>,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct BenchMetaArgs {
+    /// latent (64×S/4×S/4, the MILV variants) | image (3×S×S, DAML and FeedImg).
+    #[arg(long, default_value = "latent")]
+    input: Input,
+    #[arg(long, default_value_t = 128)]
+    size: i64,
+    #[arg(long, default_value_t = 4)]
+    tasks: usize,
+    #[arg(long, default_value_t = 50)]
+    frames: i64,
+    #[arg(long, default_value_t = 10)]
+    steps: u64,
+    #[arg(long, default_value_t = 2)]
+    warmup: u64,
+    #[command(flatten)]
+    rt: Runtime,
+}
+
+fn translator_for(
+    variant: Variant,
+    path: Option<&PathBuf>,
+) -> anyhow::Result<Option<checkpoint::CheckpointMeta>> {
+    let Some(p) = path else {
+        if variant != Variant::Daml {
+            bail!(
+                "--variant {} trains on a translator's imagined rows: pass --translator RUN/checkpoints/step-N",
+                variant.name()
+            );
+        }
+        return Ok(None);
+    };
+    let m = checkpoint::read_meta(p).with_context(|| format!("reading translator {}", p.display()))?;
+    match (variant, m.train.decoupled) {
+        (Variant::Degi, false) => bail!(
+            "--variant degi needs a decoupled A-CycleGAN (trained with --decoupled); {} is coupled",
+            p.display()
+        ),
+        (Variant::Milv | Variant::Wstable | Variant::Feedimg, true) => bail!(
+            "--variant {} needs the coupled A-CycleGAN; {} was trained --decoupled (that is degi)",
+            variant.name(),
+            p.display()
+        ),
+        _ => Ok(Some(m)),
+    }
+}
+
+pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
+    let dev = a.rt.apply()?;
+    let ds = Dataset::open(&a.dataset.root)?;
+    let ckpts = a.out.join("checkpoints");
+    let resumed = if a.resume {
+        meta_train::latest(&ckpts)?
+    } else {
+        None
+    };
+    if a.resume && resumed.is_none() {
+        eprintln!(
+            "milv-train meta: no checkpoint in {} yet; starting fresh",
+            ckpts.display()
+        );
+    }
+    if !a.resume && meta_train::latest(&ckpts)?.is_some() {
+        bail!(
+            "{} already holds checkpoints: pass --resume to continue, or choose another --out",
+            ckpts.display()
+        );
+    }
+    let tr = translator_for(a.variant, a.translator.as_ref())?;
+    let version = match &resumed {
+        Some(d) => {
+            let v = meta_train::read_meta(d)?.1.data.version;
+            if a.dataset.version.is_some_and(|w| w != v) {
+                bail!(
+                    "{} trained on version {v}, not {}",
+                    d.display(),
+                    a.dataset.version.unwrap_or_default()
+                );
+            }
+            v
+        }
+        None => ds.resolve(a.dataset.version)?,
+    };
+    let image_size = match (&tr, a.size) {
+        (Some(m), _) => m.model.image_size as u32,
+        (None, Some(s)) => s,
+        (None, None) => milv_data::ops::episodes(&ds, version)?
+            .iter()
+            .find(|e| e.domain == "robot" && e.kind == "demo")
+            .map(|e| e.width as u32)
+            .context("the dataset has no robot demonstrations")?,
+    };
+    let set = MetaSet::load(
+        &ds,
+        version,
+        &MetaDataOptions {
+            variant: a.variant,
+            model_id: tr.as_ref().map(|m| m.model_id.clone()),
+            image_size,
+            score_run: a.score_run.clone(),
+        },
+    )?;
+    let (seqs, frames) = set.size();
+    eprintln!(
+        "milv-train meta: {} on version {version}: {} tasks, {seqs} sequences, {frames} frames of {:?}{}",
+        a.variant.name(),
+        set.tasks.len(),
+        set.input_shape,
+        if set.variant.weighted() {
+            format!(", {} frames weighted 0 by curation", set.zero_weight_frames)
+        } else {
+            String::new()
+        }
+    );
+    let (mut run, info) = match &resumed {
+        Some(dir) => {
+            let (mut run, info) = meta_train::load(dir, dev)?;
+            if info.data.digest != set.digest {
+                bail!(
+                    "{} trained on data digest {}, but version {version} now reads as {}: the data changed",
+                    dir.display(),
+                    info.data.digest,
+                    set.digest
+                );
+            }
+            run.cfg.steps = a.steps;
+            eprintln!("milv-train meta: resuming {} at step {}", dir.display(), run.step);
+            (run, info)
+        }
+        None => {
+            let shape = set.input_shape;
+            let ad = set.action_dim.max(1);
+            let policy = if a.tiny {
+                PolicyConfig::tiny(a.variant.input(), shape, ad)
+            } else {
+                PolicyConfig::paper(a.variant.input(), shape, ad)
+            };
+            let cfg = MetaConfig {
+                variant: a.variant,
+                steps: a.steps,
+                meta_batch: a.meta_batch,
+                alpha: a.alpha,
+                lr: a.lr,
+                second_order: !a.first_order,
+                seed: a.seed,
+            };
+            let info = PolicyMeta {
+                format: String::new(),
+                step: 0,
+                policy: policy.clone(),
+                meta: cfg.clone(),
+                data: DataRef {
+                    uri: ds.root().display().to_string(),
+                    version,
+                    digest: set.digest.clone(),
+                    alignment_run: None,
+                },
+                translator: match (&tr, &a.translator) {
+                    (Some(m), Some(p)) => Some(Translator {
+                        checkpoint: std::fs::canonicalize(p).unwrap_or_else(|_| p.clone()),
+                        model_id: m.model_id.clone(),
+                    }),
+                    _ => None,
+                },
+                families: set.families.clone(),
+                image_size,
+                tool_version: milv_data::TOOL_VERSION.into(),
+            };
+            (MetaRun::new(policy, cfg, dev)?, info)
+        }
+    };
+    let min = run.net.cfg.min_frames() as i64;
+    if let Some(s) = set.seqs.iter().find(|s| s.frames.size()[0] < min) {
+        bail!(
+            "episode {} has {} frames; the adaptation loss needs sequences of at least {min}",
+            s.episode_id,
+            s.frames.size()[0]
+        );
+    }
+    let bar = cli::bar(run.cfg.steps, "meta steps");
+    bar.set_position(run.step);
+    let report = meta_train::train_meta(
+        &mut run,
+        &set,
+        &info,
+        &MetaRunOptions {
+            out: a.out.clone(),
+            checkpoint_every: a.checkpoint_every,
+        },
+        &mut |l| {
+            bar.set_position(l.step);
+            bar.set_message(format!("inner {:.4} outer {:.4}", l.losses.inner, l.losses.outer));
+        },
+    )?;
+    bar.finish_and_clear();
+    if a.rt.json {
+        cli::print_json(&report)?;
+    } else {
+        println!(
+            "{} meta-trained to step {} ({} steps, {:.0} ms/step); outer loss {:.4} → {:.4}",
+            a.variant.name(),
+            report.step,
+            report.steps_run,
+            report.mean_step_ms,
+            report.outer_first,
+            report.outer_last
+        );
+        if let Some(c) = &report.checkpoint {
+            println!("checkpoint {}", c.display());
+        }
+        println!("losses {}", a.out.join("losses.jsonl").display());
+    }
+    Ok(cli::EXIT_OK)
+}
+
+pub fn cmd_eval(a: EvalArgs) -> anyhow::Result<u8> {
+    let dev = a.rt.apply()?;
+    let (run, info) =
+        meta_train::load(&a.policy, dev).with_context(|| format!("loading policy {}", a.policy.display()))?;
+    let family = match a.family {
+        Some(f) => f,
+        None => match info.families.as_slice() {
+            [f] => f.parse().map_err(anyhow::Error::msg)?,
+            other => {
+                bail!("the policy trained on families {other:?}: choose one with --family drawing|pushing")
+            }
+        },
+    };
+    let translator = match (a.translator.as_ref(), &info.translator) {
+        (Some(p), _) => Some(p.clone()),
+        (None, Some(t)) => Some(t.checkpoint.clone()),
+        (None, None) => None,
+    };
+    let nets = match (&translator, info.variant()) {
+        (_, Variant::Daml) => None,
+        (Some(p), _) => {
+            let (acg, m) =
+                checkpoint::load(p, dev).with_context(|| format!("loading translator {}", p.display()))?;
+            if let Some(t) = &info.translator
+                && t.model_id != m.model_id
+            {
+                bail!(
+                    "{} is model {}, but the policy trained on rows of model {}",
+                    p.display(),
+                    m.model_id,
+                    t.model_id
+                );
+            }
+            Some(acg.nets)
+        }
+        (None, v) => bail!("variant {} needs its translator: pass --translator", v.name()),
+    };
+    let variant = info.variant();
+    let alpha = run.cfg.alpha;
+    let mut learner = PolicyLearner::new(run.net, variant, alpha, nets, info.image_size)?;
+    let opts = EvalOptions {
+        family,
+        trials: a.trials,
+        seeds: a.seeds.clone(),
+        image_size: info.image_size,
+    };
+    let bar = cli::bar(0, "trials");
+    let result = oneshot::evaluate(&mut learner, &opts, &mut |done, total| {
+        bar.set_length(total as u64);
+        bar.set_position(done as u64);
+    })?;
+    bar.finish_and_clear();
+    let record = EvalRecord {
+        variant,
+        policy: a.policy.display().to_string(),
+        dataset: info.data.uri.clone(),
+        dataset_version: info.data.version,
+        translator_model: info.translator.as_ref().map(|t| t.model_id.clone()),
+        meta_steps: info.step,
+        result,
+    };
+    if let Some(o) = &a.out {
+        checkpoint::write_json(o, &record)?;
+    }
+    if a.rt.json {
+        cli::print_json(&record)?;
+    } else {
+        let r = &record.result;
+        println!(
+            "{} on simulated {}: {}/{} = {:.1} % (95 % CI {:.1}–{:.1} %) over {} tasks × {} trials",
+            variant.label(),
+            family.name(),
+            r.successes,
+            r.trials,
+            100.0 * r.rate,
+            100.0 * r.wilson95[0],
+            100.0 * r.wilson95[1],
+            r.per_task.len(),
+            r.trials_per_task
+        );
+        if family == Family::Pushing {
+            println!("failures: wrong object {}, control {}", r.wrong_object, r.control);
+        }
+        for t in &r.per_task {
+            println!("  {:<24} {:>3}/{}", t.task, t.successes, t.trials);
+        }
+    }
+    Ok(cli::EXIT_OK)
+}
+
+pub fn cmd_table(a: TableArgs) -> anyhow::Result<u8> {
+    let mut records = Vec::new();
+    for p in &a.reports {
+        let bytes = std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
+        let r: EvalRecord =
+            serde_json::from_slice(&bytes).with_context(|| format!("{}: not an eval report", p.display()))?;
+        records.push(r);
+    }
+    let md = oneshot::tables_markdown(&records);
+    if let Some(o) = &a.out {
+        std::fs::write(o, &md).with_context(|| format!("writing {}", o.display()))?;
+    }
+    print!("{md}");
+    Ok(cli::EXIT_OK)
+}
+
+pub fn cmd_bench_meta(a: BenchMetaArgs) -> anyhow::Result<u8> {
+    let dev = a.rt.apply()?;
+    let shape = match a.input {
+        Input::Latent => [64, a.size / 4, a.size / 4],
+        Input::Image => [3, a.size, a.size],
+    };
+    let r = meta_train::bench_meta(a.input, shape, a.tasks, a.frames, a.warmup, a.steps, dev)?;
+    if a.rt.json {
+        cli::print_json(&r)?;
+    } else {
+        println!(
+            "second-order meta step, {} tasks × {} frames of {:?}: median {:.1} ms, mean {:.1} ms over {} steps ({} threads)",
+            r.tasks, r.frames, r.input_shape, r.median_ms, r.mean_ms, r.steps, r.threads
+        );
+    }
+    Ok(cli::EXIT_OK)
+}

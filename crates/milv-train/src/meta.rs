@@ -1,0 +1,628 @@
+//! The meta-policy of DAML and MILV (paper section 3.2 and 4.2, eq. 6 and 11, Appendix
+//! A.2) and one meta-training step.
+//!
+//! The policy is written functionally — every layer reads its weights from a slice of
+//! tensors — so the inner update θ' = θ − α ∇_θ L_ψ(θ, d_tr) can be applied without
+//! touching the stored weights, and the outer loss differentiates through it (second
+//! order: the inner gradient is taken with `create_graph`, which is also the only way the
+//! learned adaptation loss's weights ψ receive a gradient).
+//!
+//! Layout of θ: the convolutions (16 filters of 5×5; latents: two strided and one not;
+//! images: three strided and three not), spatial softmax, three fully connected layers
+//! of 100 units, then two heads: the **pre-update head** (a linear map to
+//! [`PolicyConfig::pre_dim`] features per frame, read only by L_ψ) and the
+//! **post-update head** (the action). ψ: three temporal convolutions over the sequence of
+//! pre-update features (10×1, 10×1, 1×1); L_ψ is the mean of their squared output.
+
+use serde::{Deserialize, Serialize};
+use tch::nn::{self, Init};
+use tch::{Device, Kind, Tensor};
+
+use crate::adam::Adam;
+use crate::nets::spatial_softmax;
+use crate::{Error, Result};
+
+/// Which of the paper's methods a policy is trained as.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Variant {
+    /// Images; inner on a human video, outer on a robot demonstration with true actions.
+    Daml,
+    /// Imagined latents; inner on one human demo, outer on another with predicted
+    /// actions, each frame weighted by its curated β weight (eq. 11).
+    Milv,
+    /// MILV with every weight 1.
+    Wstable,
+    /// MILV on the translated images instead of latents.
+    Feedimg,
+    /// MILV on latents of a decoupled A-CycleGAN.
+    Degi,
+}
+
+impl Variant {
+    pub const ALL: [Variant; 5] = [
+        Variant::Daml,
+        Variant::Degi,
+        Variant::Feedimg,
+        Variant::Wstable,
+        Variant::Milv,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Variant::Daml => "daml",
+            Variant::Milv => "milv",
+            Variant::Wstable => "wstable",
+            Variant::Feedimg => "feedimg",
+            Variant::Degi => "degi",
+        }
+    }
+
+    /// The paper's spelling, for tables.
+    pub fn label(self) -> &'static str {
+        match self {
+            Variant::Daml => "DAML",
+            Variant::Milv => "MILV",
+            Variant::Wstable => "WStable",
+            Variant::Feedimg => "FeedImg",
+            Variant::Degi => "DeGI",
+        }
+    }
+
+    pub fn input(self) -> Input {
+        match self {
+            Variant::Daml | Variant::Feedimg => Input::Image,
+            Variant::Milv | Variant::Wstable | Variant::Degi => Input::Latent,
+        }
+    }
+
+    /// Whether the outer loss uses the curated per-frame weights.
+    pub fn weighted(self) -> bool {
+        matches!(self, Variant::Milv | Variant::Feedimg | Variant::Degi)
+    }
+}
+
+impl std::str::FromStr for Variant {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        Variant::ALL
+            .into_iter()
+            .find(|v| v.name() == s.to_ascii_lowercase())
+            .ok_or_else(|| format!("unknown variant {s:?} (daml | milv | wstable | feedimg | degi)"))
+    }
+}
+
+/// What the policy sees.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Input {
+    /// Latents of F's encoder, `[C, S/4, S/4]`.
+    Latent,
+    /// RGB images in [-1, 1], `[3, S, S]`.
+    Image,
+}
+
+impl std::str::FromStr for Input {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "latent" => Ok(Input::Latent),
+            "image" => Ok(Input::Image),
+            _ => Err(format!("unknown input {s:?} (latent | image)")),
+        }
+    }
+}
+
+/// The policy network's shape (Appendix A.2 for the defaults).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PolicyConfig {
+    pub input: Input,
+    /// One observation: channels, height, width.
+    pub input_shape: [i64; 3],
+    pub filters: i64,
+    pub kernel: i64,
+    /// Stride of each convolution (their number is the number of conv layers).
+    pub strides: Vec<i64>,
+    pub hidden: i64,
+    pub fc_layers: usize,
+    /// Width of the pre-update head.
+    pub pre_dim: i64,
+    /// Filters of the first two temporal convolutions.
+    pub tconv_filters: i64,
+    /// Kernel lengths of the three temporal convolutions.
+    pub tconv_kernels: [i64; 3],
+    pub action_dim: i64,
+    /// Actions are learned divided by this (cm), so targets are of order 1.
+    pub action_scale: f64,
+}
+
+impl PolicyConfig {
+    /// The paper's network for `input` observations of `shape`.
+    pub fn paper(input: Input, input_shape: [i64; 3], action_dim: i64) -> PolicyConfig {
+        PolicyConfig {
+            input,
+            input_shape,
+            filters: 16,
+            kernel: 5,
+            strides: match input {
+                Input::Latent => vec![2, 2, 1],
+                Input::Image => vec![2, 2, 2, 1, 1, 1],
+            },
+            hidden: 100,
+            fc_layers: 3,
+            pre_dim: 20,
+            tconv_filters: 10,
+            tconv_kernels: [10, 10, 1],
+            action_dim,
+            action_scale: 5.0,
+        }
+    }
+
+    /// Small shapes for tests.
+    pub fn tiny(input: Input, input_shape: [i64; 3], action_dim: i64) -> PolicyConfig {
+        PolicyConfig {
+            filters: 3,
+            strides: vec![2, 1],
+            hidden: 6,
+            fc_layers: 2,
+            pre_dim: 4,
+            tconv_filters: 6,
+            tconv_kernels: [3, 3, 1],
+            ..PolicyConfig::paper(input, input_shape, action_dim)
+        }
+    }
+
+    /// Frames a sequence needs for the temporal convolutions (no padding).
+    pub fn min_frames(&self) -> usize {
+        self.tconv_kernels
+            .iter()
+            .map(|k| (*k - 1) as usize)
+            .sum::<usize>()
+            + 1
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        if self.strides.is_empty() || self.fc_layers == 0 || self.input_shape.iter().any(|d| *d < 1) {
+            return Err(Error::Config(
+                "the policy needs at least one convolution, one hidden layer and a non-empty input".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Meta-training settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MetaConfig {
+    pub variant: Variant,
+    pub steps: u64,
+    /// Tasks per meta-batch.
+    pub meta_batch: usize,
+    /// Inner step size α.
+    pub alpha: f64,
+    /// Outer Adam learning rate.
+    pub lr: f64,
+    /// Differentiate through the inner update (MAML's second order). Off: first order,
+    /// and ψ learns nothing.
+    pub second_order: bool,
+    pub seed: u64,
+}
+
+impl Default for MetaConfig {
+    fn default() -> Self {
+        MetaConfig {
+            variant: Variant::Milv,
+            steps: 1000,
+            meta_batch: 4,
+            alpha: 0.01,
+            lr: 1e-3,
+            second_order: true,
+            seed: 0,
+        }
+    }
+}
+
+/// The meta-policy: θ and ψ in one VarStore.
+pub struct PolicyNet {
+    pub cfg: PolicyConfig,
+    pub vs: nn::VarStore,
+    /// θ, in layer order (weight, bias per layer); the post-update head is the last pair.
+    pub theta: Vec<Tensor>,
+    /// ψ: the temporal convolutions (weight, bias each).
+    pub psi: Vec<Tensor>,
+}
+
+/// Variable `layer.name` (tch joins path segments with dots).
+fn var(p: &nn::Path, name: &str, dims: &[i64], fan_in: i64) -> Tensor {
+    // PyTorch's default for conv and linear layers: U(−1/√fan_in, 1/√fan_in) for weights
+    // (kaiming_uniform with a = √5) and biases.
+    let b = 1.0 / (fan_in.max(1) as f64).sqrt();
+    let (layer, leaf) = name.rsplit_once('.').unwrap_or(("", name));
+    let path = layer
+        .split('.')
+        .filter(|s| !s.is_empty())
+        .fold(p.clone(), |p, s| p / s);
+    path.var(leaf, dims, Init::Uniform { lo: -b, up: b })
+}
+
+impl PolicyNet {
+    pub fn new(cfg: PolicyConfig, device: Device) -> Result<PolicyNet> {
+        cfg.validate()?;
+        let vs = nn::VarStore::new(device);
+        let root = vs.root();
+        let (k, f) = (cfg.kernel, cfg.filters);
+        let mut theta = Vec::new();
+        let mut c_in = cfg.input_shape[0];
+        for i in 0..cfg.strides.len() {
+            let fan = c_in * k * k;
+            theta.push(var(&root, &format!("conv{i}.weight"), &[f, c_in, k, k], fan));
+            theta.push(var(&root, &format!("conv{i}.bias"), &[f], fan));
+            c_in = f;
+        }
+        let mut d_in = 2 * f;
+        for i in 0..cfg.fc_layers {
+            theta.push(var(&root, &format!("fc{i}.weight"), &[cfg.hidden, d_in], d_in));
+            theta.push(var(&root, &format!("fc{i}.bias"), &[cfg.hidden], d_in));
+            d_in = cfg.hidden;
+        }
+        for (name, out) in [("pre", cfg.pre_dim), ("post", cfg.action_dim)] {
+            theta.push(var(&root, &format!("{name}.weight"), &[out, d_in], d_in));
+            theta.push(var(&root, &format!("{name}.bias"), &[out], d_in));
+        }
+        let mut psi = Vec::new();
+        let [k0, k1, k2] = cfg.tconv_kernels;
+        let tf = cfg.tconv_filters;
+        for (i, (ci, co, kk)) in [(cfg.pre_dim, tf, k0), (tf, tf, k1), (tf, cfg.action_dim, k2)]
+            .into_iter()
+            .enumerate()
+        {
+            psi.push(var(&root, &format!("loss.t{i}.weight"), &[co, ci, kk], ci * kk));
+            psi.push(var(&root, &format!("loss.t{i}.bias"), &[co], ci * kk));
+        }
+        Ok(PolicyNet { cfg, vs, theta, psi })
+    }
+
+    /// The θ that the inner step updates (all but the post-update head, which L_ψ does
+    /// not read).
+    pub fn inner_len(&self) -> usize {
+        self.theta.len() - 2
+    }
+
+    fn trunk(&self, th: &[Tensor], x: &Tensor) -> Tensor {
+        let pad = self.cfg.kernel / 2;
+        let mut h = x.shallow_clone();
+        for (i, &s) in self.cfg.strides.iter().enumerate() {
+            h = h
+                .conv2d(&th[2 * i], Some(&th[2 * i + 1]), [s, s], [pad, pad], [1, 1], 1)
+                .relu();
+        }
+        let mut h = spatial_softmax(&h);
+        let base = 2 * self.cfg.strides.len();
+        for j in 0..self.cfg.fc_layers {
+            h = h.linear(&th[base + 2 * j], Some(&th[base + 2 * j + 1])).relu();
+        }
+        h
+    }
+
+    fn head(th: &[Tensor], h: &Tensor, from_end: usize) -> Tensor {
+        let n = th.len();
+        h.linear(&th[n - from_end], Some(&th[n - from_end + 1]))
+    }
+
+    /// Pre-update features `[T, pre_dim]` of a sequence `[T, C, H, W]`.
+    pub fn pre(&self, th: &[Tensor], x: &Tensor) -> Tensor {
+        PolicyNet::head(th, &self.trunk(th, x), 4)
+    }
+
+    /// Actions `[T, action_dim]` in units of `action_scale`.
+    pub fn act(&self, th: &[Tensor], x: &Tensor) -> Tensor {
+        PolicyNet::head(th, &self.trunk(th, x), 2)
+    }
+
+    /// L_ψ(θ, d): temporal convolutions over the pre-update features of one sequence,
+    /// squared and averaged.
+    pub fn adaptation_loss(&self, th: &[Tensor], psi: &[Tensor], x: &Tensor) -> Tensor {
+        let mut h = self.pre(th, x).transpose(0, 1).unsqueeze(0);
+        for i in 0..3 {
+            h = h.conv1d(&psi[2 * i], Some(&psi[2 * i + 1]), [1], [0], [1], 1);
+            if i < 2 {
+                h = h.relu();
+            }
+        }
+        h.square().mean(h.kind())
+    }
+
+    /// θ' = θ − α ∇_θ L_ψ(θ, x). With `create_graph` the result stays differentiable in
+    /// θ and ψ through the gradient (second order); without, the gradient is a constant.
+    pub fn adapt(
+        &self,
+        th: &[Tensor],
+        psi: &[Tensor],
+        x: &Tensor,
+        alpha: f64,
+        create_graph: bool,
+    ) -> (Vec<Tensor>, Tensor) {
+        let loss = self.adaptation_loss(th, psi, x);
+        let k = th.len() - 2;
+        let grads = Tensor::run_backward(&[&loss], &th[..k], true, create_graph);
+        let mut out: Vec<Tensor> = th[..k].iter().zip(&grads).map(|(t, g)| t - g * alpha).collect();
+        out.extend(th[k..].iter().map(Tensor::shallow_clone));
+        (out, loss)
+    }
+
+    /// Behaviour cloning, weighted per frame: (1/T) Σ_t w_t · mean_a (π(x_t) − a_t)². The
+    /// weights are not normalised, so a frame's share of the gradient is proportional to
+    /// its weight.
+    pub fn bc_loss(&self, th: &[Tensor], x: &Tensor, actions: &Tensor, weights: &Tensor) -> Tensor {
+        let err = (self.act(th, x) - actions).square().mean_dim(1, false, x.kind());
+        (err * weights).mean(x.kind())
+    }
+
+    pub fn save(&self, path: &std::path::Path) -> Result<()> {
+        Ok(self.vs.save(path)?)
+    }
+
+    pub fn load(&mut self, path: &std::path::Path) -> Result<()> {
+        self.vs
+            .load(path)
+            .map_err(|e| Error::Checkpoint(format!("{}: {e}", path.display())))
+    }
+}
+
+/// One task of a meta-batch: the inner sequence (no actions) and the outer sequence with
+/// its target actions (scaled) and per-frame weights.
+pub struct MetaTask {
+    pub inner: Tensor,
+    pub outer: Tensor,
+    pub actions: Tensor,
+    pub weights: Tensor,
+}
+
+/// Mean inner and outer loss of one meta-step.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MetaLosses {
+    /// L_ψ before adaptation.
+    pub inner: f64,
+    /// Weighted behaviour cloning after adaptation.
+    pub outer: f64,
+}
+
+/// The meta-objective (eq. 6 / 11) averaged over `tasks`, as a differentiable scalar.
+pub fn meta_objective(net: &PolicyNet, tasks: &[MetaTask], alpha: f64, second_order: bool) -> (Tensor, f64) {
+    let mut total: Option<Tensor> = None;
+    let mut inner = 0.0;
+    for t in tasks {
+        let (adapted, li) = net.adapt(&net.theta, &net.psi, &t.inner, alpha, second_order);
+        inner += li.double_value(&[]);
+        let lo = net.bc_loss(&adapted, &t.outer, &t.actions, &t.weights);
+        total = Some(match total {
+            Some(s) => s + lo,
+            None => lo,
+        });
+    }
+    let n = tasks.len().max(1) as f64;
+    let total = total.unwrap_or_else(|| Tensor::zeros([], (Kind::Float, net.vs.device())));
+    (total / n, inner / n)
+}
+
+/// A meta-training run: the policy, its optimiser and the step count.
+pub struct MetaRun {
+    pub net: PolicyNet,
+    pub cfg: MetaConfig,
+    pub adam: Adam,
+    pub step: u64,
+}
+
+impl MetaRun {
+    pub fn new(policy: PolicyConfig, cfg: MetaConfig, device: Device) -> Result<MetaRun> {
+        if cfg.meta_batch == 0 || !(cfg.lr > 0.0) {
+            return Err(Error::Config(
+                "--meta-batch must be at least 1 and --lr positive".into(),
+            ));
+        }
+        tch::manual_seed(cfg.seed as i64);
+        let net = PolicyNet::new(policy, device)?;
+        let adam = Adam::new(&net.vs, cfg.lr, 0.9);
+        Ok(MetaRun {
+            net,
+            cfg,
+            adam,
+            step: 0,
+        })
+    }
+
+    /// One outer Adam step on a meta-batch.
+    pub fn step(&mut self, tasks: &[MetaTask]) -> MetaLosses {
+        self.adam.zero_grad();
+        let (loss, inner) = meta_objective(&self.net, tasks, self.cfg.alpha, self.cfg.second_order);
+        let outer = loss.double_value(&[]);
+        loss.backward();
+        self.adam.step();
+        self.step += 1;
+        MetaLosses { inner, outer }
+    }
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    fn tiny_net(kind: Kind) -> PolicyNet {
+        let mut net = PolicyNet::new(PolicyConfig::tiny(Input::Latent, [2, 6, 6], 2), Device::Cpu).unwrap();
+        if kind == Kind::Double {
+            net.vs.double();
+        }
+        net
+    }
+
+    fn task(kind: Kind, t: i64, seed: i64) -> MetaTask {
+        tch::manual_seed(seed);
+        let o = (kind, Device::Cpu);
+        MetaTask {
+            inner: Tensor::randn([t, 2, 6, 6], o),
+            outer: Tensor::randn([t, 2, 6, 6], o),
+            actions: Tensor::randn([t, 2], o),
+            weights: Tensor::rand([t], o) + 0.5,
+        }
+    }
+
+    fn objective(net: &PolicyNet, tasks: &[MetaTask]) -> f64 {
+        meta_objective(net, tasks, 0.3, true).0.double_value(&[])
+    }
+
+    /// Analytic gradient of the meta-objective (through the inner step) against central
+    /// differences, in f64, for entries of θ (trunk and both heads) and ψ.
+    #[test]
+    fn the_second_order_meta_gradient_equals_finite_differences() {
+        let _serial = crate::testing::torch_rng();
+        let net = tiny_net(Kind::Double);
+        let tasks = [task(Kind::Double, 9, 1), task(Kind::Double, 9, 2)];
+        let (loss, _) = meta_objective(&net, &tasks, 0.3, true);
+        loss.backward();
+        let params: Vec<Tensor> = net
+            .theta
+            .iter()
+            .chain(&net.psi)
+            .map(Tensor::shallow_clone)
+            .collect();
+        let mut checked = 0;
+        for p in &params {
+            let g = p.grad().flatten(0, -1);
+            let flat = p.flatten(0, -1);
+            for idx in [0, flat.size()[0] - 1] {
+                let h = 1e-6;
+                let orig = flat.double_value(&[idx]);
+                let set = |v: f64| {
+                    tch::no_grad(|| {
+                        let _ = flat.get(idx).fill_(v);
+                    })
+                };
+                set(orig + h);
+                let up = objective(&net, &tasks);
+                set(orig - h);
+                let down = objective(&net, &tasks);
+                set(orig);
+                let fd = (up - down) / (2.0 * h);
+                let an = g.double_value(&[idx]);
+                assert!(
+                    (fd - an).abs() <= 1e-6 + 1e-5 * an.abs().max(fd.abs()),
+                    "finite difference {fd} vs analytic {an}"
+                );
+                checked += 1;
+            }
+        }
+        assert_eq!(checked, 2 * params.len());
+        // ψ's gradient exists only through the inner step: it must not be zero here, or
+        // the comparison above proved nothing for it.
+        let psi_grad: f64 = net
+            .psi
+            .iter()
+            .map(|p| p.grad().abs().sum(Kind::Double).double_value(&[]))
+            .sum();
+        assert!(psi_grad > 1e-9, "ψ has no gradient ({psi_grad})");
+    }
+
+    #[test]
+    fn psi_learns_only_through_the_second_order_term() {
+        let _serial = crate::testing::torch_rng();
+        let tasks = [task(Kind::Float, 12, 3)];
+        for second in [true, false] {
+            let net = tiny_net(Kind::Float);
+            let (loss, _) = meta_objective(&net, &tasks, 0.1, second);
+            loss.backward();
+            let norm: f64 = net
+                .psi
+                .iter()
+                .map(|p| {
+                    let g = p.grad();
+                    if g.defined() {
+                        g.abs().sum(Kind::Double).double_value(&[])
+                    } else {
+                        0.0
+                    }
+                })
+                .sum();
+            if second {
+                assert!(norm > 1e-8, "ψ got no gradient: {norm}");
+            } else {
+                assert_eq!(norm, 0.0);
+            }
+        }
+    }
+
+    /// Eq. 11's weights: the outer gradient is linear in each frame's weight, so doubling
+    /// one frame's weight adds exactly its share once more.
+    #[test]
+    fn doubling_a_frames_weight_doubles_its_share_of_the_outer_gradient() {
+        let _serial = crate::testing::torch_rng();
+        let net = tiny_net(Kind::Double);
+        let base = task(Kind::Double, 10, 4);
+        let grad_with = |w: &Tensor| -> Tensor {
+            net.adam_free_zero_grad();
+            let t = MetaTask {
+                inner: base.inner.shallow_clone(),
+                outer: base.outer.shallow_clone(),
+                actions: base.actions.shallow_clone(),
+                weights: w.shallow_clone(),
+            };
+            let (loss, _) = meta_objective(&net, &[t], 0.2, true);
+            loss.backward();
+            Tensor::cat(
+                &net.theta
+                    .iter()
+                    .map(|p| p.grad().flatten(0, -1))
+                    .collect::<Vec<_>>(),
+                0,
+            )
+            .copy()
+        };
+        let w = base.weights.copy();
+        let g = grad_with(&w);
+        let k = 4;
+        let zeroed = w.copy();
+        let _ = zeroed.get(k).fill_(0.0);
+        let doubled = w.copy();
+        let _ = doubled.get(k).fill_(2.0 * w.double_value(&[k]));
+        let share = &g - grad_with(&zeroed);
+        let twice = grad_with(&doubled) - grad_with(&zeroed);
+        assert!(
+            share.abs().max().double_value(&[]) > 1e-9,
+            "frame {k} has no share"
+        );
+        let err = (&twice - &share * 2.0).abs().max().double_value(&[]);
+        assert!(err < 1e-10, "doubled share differs from twice the share by {err}");
+    }
+
+    #[test]
+    fn meta_training_lowers_the_outer_loss() {
+        let _serial = crate::testing::torch_rng();
+        let mut run = MetaRun::new(
+            PolicyConfig::tiny(Input::Latent, [2, 6, 6], 2),
+            MetaConfig {
+                lr: 0.01,
+                ..MetaConfig::default()
+            },
+            Device::Cpu,
+        )
+        .unwrap();
+        let tasks = [task(Kind::Float, 8, 5), task(Kind::Float, 8, 6)];
+        let first = run.step(&tasks).outer;
+        let mut last = first;
+        for _ in 0..150 {
+            last = run.step(&tasks).outer;
+        }
+        assert!(last < first / 2.0, "outer loss {first} → {last}");
+    }
+
+    impl PolicyNet {
+        fn adam_free_zero_grad(&self) {
+            for p in self.theta.iter().chain(&self.psi) {
+                let mut g = p.grad();
+                if g.defined() {
+                    let _ = g.detach_().zero_();
+                }
+            }
+        }
+    }
+}

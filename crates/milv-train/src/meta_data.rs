@@ -1,0 +1,367 @@
+//! What a meta-policy trains on, from one pinned dataset version, grouped by task.
+//!
+//! | variant | inner sequence (no actions) | outer sequence (actions, weights) |
+//! |---|---|---|
+//! | `daml` | a human demo's frames | a robot demo of the same task: frames, true actions, weight 1 |
+//! | `milv`, `degi` | a human demo's imagined latents ẑ^r | another human demo of the task: latents, predicted actions â^r, curated weights |
+//! | `wstable` | as `milv` | as `milv`, weight 1 |
+//! | `feedimg` | a human demo's translated frames ŷ^r | another human demo: translated frames, â^r, curated weights |
+//!
+//! Only `split = train`, `kind = demo` episodes are read. A task with a single human demo
+//! uses it for both sides. Sequences are held in memory as f32 tensors on the CPU and
+//! moved to the device per meta-batch.
+
+use std::collections::BTreeMap;
+
+use milv_data::view::{EpisodeView, Image, ViewOptions, ViewPlan};
+use milv_data::{Dataset, Episode, ops};
+use rand::{Rng, SeedableRng, rngs::StdRng};
+use tch::{Device, Tensor};
+
+use crate::data::{load_clips, to_chw};
+use crate::meta::{Input, MetaTask, Variant};
+use crate::{Error, Result};
+
+/// One episode as the policy sees it.
+pub struct Sequence {
+    pub episode_id: String,
+    /// `[T, C, H, W]` f32.
+    pub frames: Tensor,
+    /// `[T, A]` in cm (outer sequences).
+    pub actions: Option<Tensor>,
+    /// `[T]` loss weights.
+    pub weights: Tensor,
+}
+
+/// The sequences of one task: indices into [`MetaSet::seqs`].
+#[derive(Clone, Debug, Default)]
+pub struct TaskSeqs {
+    pub inner: Vec<usize>,
+    pub outer: Vec<usize>,
+}
+
+pub struct MetaSet {
+    pub version: u64,
+    pub variant: Variant,
+    pub seqs: Vec<Sequence>,
+    pub tasks: BTreeMap<String, TaskSeqs>,
+    /// One observation's shape.
+    pub input_shape: [i64; 3],
+    pub action_dim: i64,
+    /// Task families present (`drawing`, `pushing`).
+    pub families: Vec<String>,
+    /// Hash of the files and selection read: a resumed run checks it.
+    pub digest: String,
+    /// Frames with weight 0 (dropped by curation) among the outer sequences.
+    pub zero_weight_frames: usize,
+}
+
+/// What to read.
+#[derive(Clone, Debug)]
+pub struct MetaDataOptions {
+    pub variant: Variant,
+    /// The translation model whose imagined rows to read (all variants but `daml`).
+    pub model_id: Option<String>,
+    /// Frame size for image variants (frames are resized to it).
+    pub image_size: u32,
+    /// Scoring run for the weights (default: the newest over the model).
+    pub score_run: Option<String>,
+}
+
+fn decode(img: &Image, size: u32, what: &str) -> Result<Vec<f32>> {
+    let rgb = image::load_from_memory(&img.data)
+        .map_err(|e| Error::Data(format!("{what}: cannot decode the {} frame: {e}", img.format)))?
+        .to_rgb8();
+    let (w, h) = rgb.dimensions();
+    Ok(to_chw(rgb.as_raw(), w, h, size))
+}
+
+fn task_of(e: &Episode) -> String {
+    e.task_id.clone().unwrap_or_else(|| e.episode_id.clone())
+}
+
+impl MetaSet {
+    pub fn load(ds: &Dataset, v: u64, opts: &MetaDataOptions) -> Result<MetaSet> {
+        let eps = ops::episodes(ds, v)?;
+        let demos = |domain: &str| -> BTreeMap<String, Episode> {
+            eps.iter()
+                .filter(|e| e.domain == domain && e.kind == "demo" && e.split == "train")
+                .map(|e| (e.episode_id.clone(), e.clone()))
+                .collect()
+        };
+        let humans = demos("human");
+        if humans.is_empty() {
+            return Err(Error::Data(format!(
+                "version {v} has no human demonstrations (domain=human, kind=demo, split=train)"
+            )));
+        }
+        let mut families: Vec<String> = humans.values().filter_map(|e| e.task_family.clone()).collect();
+        families.sort();
+        families.dedup();
+        let mut set = MetaSet {
+            version: v,
+            variant: opts.variant,
+            seqs: Vec::new(),
+            tasks: BTreeMap::new(),
+            input_shape: [0; 3],
+            action_dim: 0,
+            families,
+            digest: String::new(),
+            zero_weight_frames: 0,
+        };
+        let mut parts: Vec<String> = vec!["milv-train/meta-data/1".into(), opts.variant.name().into()];
+        match opts.variant {
+            Variant::Daml => set.load_daml(ds, v, &humans, &demos("robot"), opts.image_size)?,
+            _ => {
+                let model = opts.model_id.clone().ok_or_else(|| {
+                    Error::Config(format!(
+                        "variant {} needs a translation model",
+                        opts.variant.name()
+                    ))
+                })?;
+                parts.push(model.clone());
+                set.load_imagined(ds, v, &humans, &model, opts)?;
+            }
+        }
+        if set.tasks.is_empty() {
+            return Err(Error::Data(format!(
+                "version {v}: no task has usable demonstrations"
+            )));
+        }
+        parts.extend(
+            ds.files(milv_data::TableKind::Frames, v)?
+                .into_iter()
+                .map(|f| f.info.path),
+        );
+        parts.extend(
+            ds.files(milv_data::TableKind::Imagined, v)?
+                .into_iter()
+                .map(|f| f.info.path),
+        );
+        parts.extend(set.seqs.iter().map(|s| s.episode_id.clone()));
+        set.digest = milv_data::run_id(&parts);
+        Ok(set)
+    }
+
+    fn push(&mut self, task: &str, seq: Sequence, inner: bool, outer: bool) {
+        let i = self.seqs.len();
+        let shape = seq.frames.size();
+        self.input_shape = [shape[1], shape[2], shape[3]];
+        if let Some(a) = &seq.actions {
+            self.action_dim = a.size()[1];
+        }
+        self.seqs.push(seq);
+        let t = self.tasks.entry(task.to_string()).or_default();
+        if inner {
+            t.inner.push(i);
+        }
+        if outer {
+            t.outer.push(i);
+        }
+    }
+
+    fn load_daml(
+        &mut self,
+        ds: &Dataset,
+        v: u64,
+        humans: &BTreeMap<String, Episode>,
+        robots: &BTreeMap<String, Episode>,
+        size: u32,
+    ) -> Result<()> {
+        if robots.is_empty() {
+            return Err(Error::Data(format!(
+                "version {v} has no robot demonstrations (domain=robot, kind=demo, split=train): \
+                 DAML's outer loss needs them"
+            )));
+        }
+        let tensor = |clip: &crate::data::Clip| -> Result<Tensor> {
+            let mut data = Vec::new();
+            for t in 0..clip.frames.len() {
+                data.extend(clip.tensor_data(t, size)?);
+            }
+            Ok(Tensor::from_slice(&data).view([clip.frames.len() as i64, 3, size as i64, size as i64]))
+        };
+        for clip in load_clips(ds, v, humans, false)?.into_values() {
+            let n = clip.frames.len() as i64;
+            let seq = Sequence {
+                frames: tensor(&clip)?,
+                actions: None,
+                weights: Tensor::ones([n], (tch::Kind::Float, Device::Cpu)),
+                episode_id: clip.episode_id.clone(),
+            };
+            self.push(&task_of(&humans[&clip.episode_id]), seq, true, false);
+        }
+        for clip in load_clips(ds, v, robots, true)?.into_values() {
+            let n = clip.frames.len() as i64;
+            let acts: Vec<f32> = clip.actions.iter().flatten().flatten().copied().collect();
+            let a = Tensor::from_slice(&acts).view([n, -1]);
+            let seq = Sequence {
+                frames: tensor(&clip)?,
+                actions: Some(a),
+                weights: Tensor::ones([n], (tch::Kind::Float, Device::Cpu)),
+                episode_id: clip.episode_id.clone(),
+            };
+            let task = task_of(&robots[&clip.episode_id]);
+            // Only tasks with a human demo can be meta-trained on.
+            if self.tasks.contains_key(&task) {
+                self.push(&task, seq, false, true);
+            }
+        }
+        self.tasks
+            .retain(|_, t| !t.inner.is_empty() && !t.outer.is_empty());
+        Ok(())
+    }
+
+    fn load_imagined(
+        &mut self,
+        ds: &Dataset,
+        v: u64,
+        humans: &BTreeMap<String, Episode>,
+        model: &str,
+        opts: &MetaDataOptions,
+    ) -> Result<()> {
+        let variant = opts.variant;
+        let mut plan = ViewPlan::new(
+            ds,
+            v,
+            &ViewOptions {
+                model_id: Some(model.to_string()),
+                score_run: opts.score_run.clone(),
+                ..ViewOptions::default()
+            },
+        )?;
+        plan.episodes.retain(|e| humans.contains_key(&e.episode_id));
+        if plan.episodes.is_empty() {
+            return Err(Error::Data(format!(
+                "model {model} translated no training human demo at version {v}; run `milv-train translate`"
+            )));
+        }
+        if variant.weighted() && plan.score_run.is_none() {
+            return Err(Error::Data(format!(
+                "variant {} weights frames by their curated β, but model {model} has no scores at \
+                 version {v}: run `milv-score run` and `milv-score curate` (or train `wstable`)",
+                variant.name()
+            )));
+        }
+        let views: Vec<EpisodeView> = plan.views(ds).collect::<milv_data::Result<_>>()?;
+        for view in views {
+            let id = view.episode.episode_id.clone();
+            let n = view.frames.len() as i64;
+            let (mut frames, mut actions, mut weights) = (Vec::new(), Vec::new(), Vec::new());
+            let mut shape = [0i64; 3];
+            for f in &view.frames {
+                let what = format!("episode {id} frame {}", f.frame_index);
+                let im = f
+                    .imagined
+                    .as_ref()
+                    .ok_or_else(|| Error::Data(format!("{what}: no imagined row for model {model}")))?;
+                match variant.input() {
+                    Input::Latent => {
+                        let l = im
+                            .latent
+                            .as_ref()
+                            .ok_or_else(|| Error::Data(format!("{what}: the imagined row has no latent")))?;
+                        frames.extend(l.to_f32().map_err(|m| Error::Data(format!("{what}: {m}")))?);
+                        if let [c, h, w] = l.shape[..] {
+                            shape = [i64::from(c), i64::from(h), i64::from(w)];
+                        } else {
+                            return Err(Error::Data(format!(
+                                "{what}: latent shape {:?} is not [C, H, W]",
+                                l.shape
+                            )));
+                        }
+                    }
+                    Input::Image => {
+                        frames.extend(decode(&im.image, opts.image_size, &what)?);
+                        let s = i64::from(opts.image_size);
+                        shape = [3, s, s];
+                    }
+                }
+                actions.extend(
+                    im.action
+                        .clone()
+                        .ok_or_else(|| Error::Data(format!("{what}: no predicted action")))?,
+                );
+                let w = if variant.weighted() {
+                    let q = f
+                        .quality
+                        .ok_or_else(|| Error::Data(format!("{what}: not scored")))?;
+                    q.weight.ok_or_else(|| {
+                        Error::Data(format!(
+                            "{what}: the scores have no curation; run `milv-score curate` (or train `wstable`)"
+                        ))
+                    })?
+                } else {
+                    1.0
+                };
+                if !(w.is_finite() && w >= 0.0) {
+                    return Err(Error::Data(format!(
+                        "{what}: weight {w} is not a finite non-negative number"
+                    )));
+                }
+                self.zero_weight_frames += usize::from(w == 0.0);
+                weights.push(w as f32);
+            }
+            if let Some(bad) = actions.iter().position(|a| !a.is_finite()) {
+                return Err(Error::Data(format!(
+                    "episode {id}: predicted action {} is not finite",
+                    bad / (actions.len() / n.max(1) as usize).max(1)
+                )));
+            }
+            let seq = Sequence {
+                episode_id: id.clone(),
+                frames: Tensor::from_slice(&frames).view([n, shape[0], shape[1], shape[2]]),
+                actions: Some(Tensor::from_slice(&actions).view([n, -1])),
+                weights: Tensor::from_slice(&weights),
+            };
+            self.push(&task_of(&view.episode), seq, true, true);
+        }
+        Ok(())
+    }
+
+    /// Sequences in all, and frames in all.
+    pub fn size(&self) -> (usize, i64) {
+        (
+            self.seqs.len(),
+            self.seqs.iter().map(|s| s.frames.size()[0]).sum(),
+        )
+    }
+
+    /// Meta-batch `step`: `n` tasks (distinct while there are enough), each with an inner
+    /// and an outer sequence, the outer one a different episode where the task has one.
+    /// Deterministic in `(seed, step)`, so a resumed run draws what an uninterrupted one
+    /// would.
+    pub fn sample(&self, seed: u64, step: u64, n: usize, action_scale: f64, device: Device) -> Vec<MetaTask> {
+        let mut rng = StdRng::seed_from_u64(seed ^ step.wrapping_mul(0xA24B_AED4_963E_E407));
+        let mut names: Vec<&String> = self.tasks.keys().collect();
+        let mut out = Vec::with_capacity(n);
+        for k in 0..n {
+            if k % names.len().max(1) == 0 {
+                // A fresh shuffle per pass: tasks repeat only when n exceeds their number.
+                for i in (1..names.len()).rev() {
+                    names.swap(i, rng.random_range(0..=i));
+                }
+            }
+            let t = &self.tasks[names[k % names.len()]];
+            let i = t.inner[rng.random_range(0..t.inner.len())];
+            let others: Vec<usize> = t.outer.iter().copied().filter(|&o| o != i).collect();
+            let o = if others.is_empty() {
+                i
+            } else {
+                others[rng.random_range(0..others.len())]
+            };
+            let (si, so) = (&self.seqs[i], &self.seqs[o]);
+            let acts =
+                so.actions.as_ref().map(|a| a / action_scale).unwrap_or_else(|| {
+                    Tensor::zeros([so.frames.size()[0], 1], (tch::Kind::Float, Device::Cpu))
+                });
+            out.push(MetaTask {
+                inner: si.frames.to_device(device),
+                outer: so.frames.to_device(device),
+                actions: acts.to_device(device),
+                weights: so.weights.to_device(device),
+            });
+        }
+        out
+    }
+}

@@ -1,0 +1,331 @@
+//! Meta-training runs: the loop around [`MetaRun::step`] (task sampling per meta-batch,
+//! JSON-lines losses, checkpoints, resume) and policy checkpoints.
+//!
+//! A run folder holds `losses.jsonl` (one line per step) and `checkpoints/step-N/` with
+//! `policy.safetensors` (θ and ψ), `state.safetensors` (Adam's moments) and
+//! `policy.json` ([`PolicyMeta`]: configs, the data and the translator it trained on).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+use tch::{Device, Kind, Tensor};
+
+use crate::checkpoint::{DataRef, write_dir, write_json};
+use crate::meta::{Input, MetaConfig, MetaLosses, MetaRun, MetaTask, PolicyConfig, Variant};
+use crate::meta_data::MetaSet;
+use crate::train::append_json;
+use crate::{Error, Result};
+
+const FORMAT: &str = "milv-meta/1";
+
+/// The A-CycleGAN a policy's inputs come from (all variants but DAML).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Translator {
+    pub checkpoint: PathBuf,
+    pub model_id: String,
+}
+
+/// `policy.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PolicyMeta {
+    pub format: String,
+    pub step: u64,
+    pub policy: PolicyConfig,
+    pub meta: MetaConfig,
+    pub data: DataRef,
+    pub translator: Option<Translator>,
+    /// Task families trained on.
+    pub families: Vec<String>,
+    /// Camera frame size the policy (or its translator) takes.
+    pub image_size: u32,
+    pub tool_version: String,
+}
+
+impl PolicyMeta {
+    pub fn variant(&self) -> Variant {
+        self.meta.variant
+    }
+}
+
+/// Writes `run` as `dir/step-NNNNNNNN`.
+pub fn save(run: &MetaRun, meta: &PolicyMeta, dir: &Path) -> Result<PathBuf> {
+    write_dir(dir, &format!("step-{:08}", run.step), &mut |tmp| {
+        run.net.save(&tmp.join("policy.safetensors"))?;
+        Tensor::write_safetensors(&run.adam.state(), tmp.join("state.safetensors"))?;
+        let m = PolicyMeta {
+            format: FORMAT.into(),
+            step: run.step,
+            policy: run.net.cfg.clone(),
+            meta: run.cfg.clone(),
+            ..meta.clone()
+        };
+        write_json(&tmp.join("policy.json"), &m)
+    })
+}
+
+/// The newest policy checkpoint in a run's `checkpoints/`.
+pub fn latest(dir: &Path) -> Result<Option<PathBuf>> {
+    crate::checkpoint::latest_with(dir, "policy.json")
+}
+
+/// Reads `policy.json` of a checkpoint folder, or of the newest checkpoint of a run
+/// folder; returns the checkpoint folder with it.
+pub fn read_meta(path: &Path) -> Result<(PathBuf, PolicyMeta)> {
+    let dir = if path.join("policy.json").is_file() {
+        path.to_path_buf()
+    } else {
+        latest(&path.join("checkpoints"))?.ok_or_else(|| {
+            Error::Checkpoint(format!(
+                "{}: neither a policy checkpoint (policy.json) nor a run folder with checkpoints",
+                path.display()
+            ))
+        })?
+    };
+    let pj = dir.join("policy.json");
+    let bytes = std::fs::read(&pj).map_err(|e| Error::io(&pj, e))?;
+    let meta: PolicyMeta = serde_json::from_slice(&bytes)
+        .map_err(|e| Error::Checkpoint(format!("{}: not a policy checkpoint: {e}", pj.display())))?;
+    if meta.format != FORMAT {
+        return Err(Error::Checkpoint(format!(
+            "{}: format {:?}, expected {FORMAT:?}",
+            pj.display(),
+            meta.format
+        )));
+    }
+    for f in ["policy.safetensors", "state.safetensors"] {
+        if !dir.join(f).is_file() {
+            return Err(Error::Checkpoint(format!("{}: {f} is missing", dir.display())));
+        }
+    }
+    Ok((dir, meta))
+}
+
+/// Loads a policy checkpoint (or a run folder's newest) onto `device`.
+pub fn load(path: &Path, device: Device) -> Result<(MetaRun, PolicyMeta)> {
+    let (dir, meta) = read_meta(path)?;
+    let mut run = MetaRun::new(meta.policy.clone(), meta.meta.clone(), device)?;
+    run.net.load(&dir.join("policy.safetensors"))?;
+    let sp = dir.join("state.safetensors");
+    let state =
+        Tensor::read_safetensors(&sp).map_err(|e| Error::Checkpoint(format!("{}: {e}", sp.display())))?;
+    run.adam.load_state(state)?;
+    run.step = meta.step;
+    Ok((run, meta))
+}
+
+#[derive(Clone, Debug)]
+pub struct MetaRunOptions {
+    pub out: PathBuf,
+    pub checkpoint_every: u64,
+}
+
+/// One line of `losses.jsonl`.
+#[derive(Clone, Debug, Serialize)]
+pub struct MetaStepLog {
+    pub step: u64,
+    #[serde(flatten)]
+    pub losses: MetaLosses,
+    pub step_ms: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct MetaReport {
+    pub variant: Variant,
+    pub steps_run: u64,
+    pub step: u64,
+    pub mean_step_ms: f64,
+    /// Mean outer loss over the first and the last tenth of the steps run.
+    pub outer_first: f64,
+    pub outer_last: f64,
+    pub checkpoint: Option<PathBuf>,
+}
+
+/// Trains `run` up to `run.cfg.steps` from wherever it stands.
+pub fn train_meta(
+    run: &mut MetaRun,
+    set: &MetaSet,
+    meta: &PolicyMeta,
+    opts: &MetaRunOptions,
+    on_step: &mut dyn FnMut(&MetaStepLog),
+) -> Result<MetaReport> {
+    std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
+    let losses_path = opts.out.join("losses.jsonl");
+    let ckpt_dir = opts.out.join("checkpoints");
+    let device = run.net.vs.device();
+    let scale = run.net.cfg.action_scale;
+    let mut outers = Vec::new();
+    let mut total_ms = 0.0;
+    let mut report = MetaReport {
+        variant: run.cfg.variant,
+        steps_run: 0,
+        step: run.step,
+        mean_step_ms: 0.0,
+        outer_first: f64::NAN,
+        outer_last: f64::NAN,
+        checkpoint: None,
+    };
+    while run.step < run.cfg.steps {
+        let tasks = set.sample(run.cfg.seed, run.step, run.cfg.meta_batch, scale, device);
+        let t = Instant::now();
+        let losses = run.step(&tasks);
+        let step_ms = t.elapsed().as_secs_f64() * 1e3;
+        if !(losses.outer.is_finite() && losses.inner.is_finite()) {
+            return Err(Error::Data(format!(
+                "meta step {}: the loss is not finite (inner {}, outer {}): lower --lr or --alpha",
+                run.step, losses.inner, losses.outer
+            )));
+        }
+        total_ms += step_ms;
+        outers.push(losses.outer);
+        report.steps_run += 1;
+        let line = MetaStepLog {
+            step: run.step,
+            losses,
+            step_ms,
+        };
+        append_json(&losses_path, &line)?;
+        on_step(&line);
+        if (opts.checkpoint_every > 0 && run.step.is_multiple_of(opts.checkpoint_every))
+            || run.step == run.cfg.steps
+        {
+            report.checkpoint = Some(save(run, meta, &ckpt_dir)?);
+        }
+    }
+    let tenth = (outers.len() / 10).max(1).min(outers.len().max(1));
+    let mean = |xs: &[f64]| xs.iter().sum::<f64>() / xs.len().max(1) as f64;
+    if !outers.is_empty() {
+        report.outer_first = mean(&outers[..tenth]);
+        report.outer_last = mean(&outers[outers.len() - tenth..]);
+    }
+    report.step = run.step;
+    report.mean_step_ms = total_ms / report.steps_run.max(1) as f64;
+    Ok(report)
+}
+
+/// Timings of [`bench_meta`].
+#[derive(Clone, Debug, Serialize)]
+pub struct MetaBench {
+    pub input: Input,
+    pub input_shape: [i64; 3],
+    pub tasks: usize,
+    pub frames: i64,
+    pub steps: u64,
+    pub median_ms: f64,
+    pub mean_ms: f64,
+    pub min_ms: f64,
+    pub threads: i32,
+}
+
+/// Times second-order meta steps of the paper's policy on fixed random data: `tasks`
+/// tasks of `frames` frames each, after `warmup` untimed steps.
+pub fn bench_meta(
+    input: Input,
+    input_shape: [i64; 3],
+    tasks: usize,
+    frames: i64,
+    warmup: u64,
+    steps: u64,
+    device: Device,
+) -> Result<MetaBench> {
+    let mut run = MetaRun::new(
+        PolicyConfig::paper(input, input_shape, 2),
+        MetaConfig::default(),
+        device,
+    )?;
+    tch::manual_seed(0);
+    let o = (Kind::Float, device);
+    let [c, h, w] = input_shape;
+    let batch: Vec<MetaTask> = (0..tasks)
+        .map(|_| MetaTask {
+            inner: Tensor::randn([frames, c, h, w], o),
+            outer: Tensor::randn([frames, c, h, w], o),
+            actions: Tensor::randn([frames, 2], o),
+            weights: Tensor::rand([frames], o),
+        })
+        .collect();
+    for _ in 0..warmup {
+        run.step(&batch);
+    }
+    let mut ms: Vec<f64> = (0..steps.max(1))
+        .map(|_| {
+            let t = Instant::now();
+            run.step(&batch);
+            t.elapsed().as_secs_f64() * 1e3
+        })
+        .collect();
+    let mean = ms.iter().sum::<f64>() / ms.len() as f64;
+    ms.sort_by(f64::total_cmp);
+    Ok(MetaBench {
+        input,
+        input_shape,
+        tasks,
+        frames,
+        steps: ms.len() as u64,
+        median_ms: ms[ms.len() / 2],
+        mean_ms: mean,
+        min_ms: ms[0],
+        threads: tch::get_num_threads(),
+    })
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_policy_checkpoint_round_trips() {
+        let _serial = crate::testing::torch_rng();
+        let cfg = PolicyConfig::tiny(Input::Image, [3, 16, 16], 2);
+        let mut run = MetaRun::new(cfg.clone(), MetaConfig::default(), Device::Cpu).unwrap();
+        let o = (Kind::Float, Device::Cpu);
+        let task = MetaTask {
+            inner: Tensor::randn([8, 3, 16, 16], o),
+            outer: Tensor::randn([8, 3, 16, 16], o),
+            actions: Tensor::randn([8, 2], o),
+            weights: Tensor::ones([8], o),
+        };
+        for _ in 0..3 {
+            run.step(std::slice::from_ref(&task));
+        }
+        let meta = PolicyMeta {
+            format: String::new(),
+            step: 0,
+            policy: cfg,
+            meta: run.cfg.clone(),
+            data: DataRef {
+                uri: "ds".into(),
+                version: 3,
+                digest: "d".into(),
+                alignment_run: None,
+            },
+            translator: None,
+            families: vec!["drawing".into()],
+            image_size: 16,
+            tool_version: milv_data::TOOL_VERSION.into(),
+        };
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = save(&run, &meta, &tmp.path().join("checkpoints")).unwrap();
+        // A run folder resolves to its newest checkpoint.
+        let (mut back, m) = load(tmp.path(), Device::Cpu).unwrap();
+        assert_eq!(m.step, 3);
+        assert_eq!(m.data, meta.data);
+        for (a, b) in run
+            .net
+            .theta
+            .iter()
+            .chain(&run.net.psi)
+            .zip(back.net.theta.iter().chain(&back.net.psi))
+        {
+            assert!(a.equal(b));
+        }
+        // The optimizer state came back too: the next step is the same on both.
+        let l1 = run.step(std::slice::from_ref(&task));
+        let l2 = back.step(std::slice::from_ref(&task));
+        assert_eq!(l1, l2);
+        std::fs::remove_file(dir.join("state.safetensors")).unwrap();
+        let err = load(&dir, Device::Cpu).err().unwrap().to_string();
+        assert!(err.contains("state.safetensors is missing"), "{err}");
+    }
+}
