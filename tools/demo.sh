@@ -2,7 +2,8 @@
 # The whole pipeline on the bundled samples: ingest human and robot clips with their
 # action sidecars, align the paired clips, train a (short) A-CycleGAN and translate the
 # human clips into imagined robot data, score every frame's quality and curate by it,
-# then inspect and verify the dataset. Prints where everything is.
+# meta-train a (short) MILV policy and evaluate it one-shot in milv-sim, export MCAP and
+# Rerun recordings, then inspect and verify the dataset. Prints where everything is.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 tools/setup.sh
@@ -47,6 +48,13 @@ echo "== milv-score curate: the best 80 % of frames by weight -> the curated vie
 "$BIN/milv-score" curate "$DS" --top-fraction 0.8
 echo "== milv-score report"
 "$BIN/milv-score" report "$DS" --worst 5 --out "$OUT/quality"
+echo "== milv-train meta: a MILV meta-policy on the imagined latents, frames weighted by the curated beta"
+echo "   (second order, learned adaptation loss; 20 steps: a demo, not a policy)"
+"$BIN/milv-train" meta "$DS" --variant milv --translator "$CKPT" --out "$OUT/meta-milv" --steps 20 \
+  --checkpoint-every 20
+echo "== milv-train eval: one-shot in milv-sim, one human video per trial of each held-out shape"
+"$BIN/milv-train" eval "$OUT/meta-milv" --family drawing --trials 1 -o "$OUT/eval-milv.json"
+"$BIN/milv-train" table "$OUT/eval-milv.json" -o "$OUT/tables.md"
 echo "== milv-export mcap: human | imagined | aligned robot frames, latents, actions, beta -> MCAP (Foxglove)"
 "$BIN/milv-export" mcap "$DS" --alignment motion -o "$OUT/translations.mcap"
 echo "== milv-export rerun: the same as a Rerun recording, worst beta first"
@@ -73,6 +81,7 @@ cat <<TXT
 Outputs:
   dataset           $DS   (Delta tables: episodes, frames, alignments, imagined, scores, curated; version log: $DS/_milv/versions)
   A-CycleGAN run    $OUT/acyclegan (losses.jsonl, grids/step-*.png: human | G(human) | F(G(human)), checkpoints/)
+  meta-policy       $OUT/meta-milv (losses.jsonl, checkpoints/); one-shot success $OUT/eval-milv.json, $OUT/tables.md
   quality plots     $OUT/quality/beta_hist.png, $OUT/quality/beta_curves.png
   an alignment      $OUT/align_$PAIR.png (cost matrix of one human/robot pair, with its path)
   translations      $OUT/translations.mcap (open in Foxglove), $OUT/translations.rrd (.venv/bin/rerun $OUT/translations.rrd)

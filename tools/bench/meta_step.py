@@ -11,15 +11,13 @@ cloning after it, Adam on θ and ψ. Same tasks × frames, same threads, one pro
 Usage: tools/bench/meta_step.sh [--input latent|image] [--size 128] [--tasks 4] [--frames 50]
 """
 
-import argparse
-import json
-import statistics
-import subprocess
 import sys
 import time
 
 import torch
 import torch.nn.functional as F
+
+import torch_compare
 
 
 def uniform(shape, fan_in):
@@ -107,41 +105,21 @@ def bench_torch(input_kind, size, tasks, frames, warmup, steps):
 
 
 def main():
-    ap = argparse.ArgumentParser()
+    ap = torch_compare.parser(__doc__)
     ap.add_argument("--input", default="latent", choices=["latent", "image"])
     ap.add_argument("--size", type=int, default=128)
     ap.add_argument("--tasks", type=int, default=4)
     ap.add_argument("--frames", type=int, default=50)
-    ap.add_argument("--steps", type=int, default=10)
-    ap.add_argument("--warmup", type=int, default=2)
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--milv-train", default="target/release/milv-train")
-    ap.add_argument("--json")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
-    ours = json.loads(
-        subprocess.run(
-            [a.milv_train, "bench-meta", "--input", a.input, "--size", str(a.size), "--tasks", str(a.tasks),
-             "--frames", str(a.frames), "--steps", str(a.steps), "--warmup", str(a.warmup),
-             "--threads", str(a.threads), "--json"],
-            check=True, capture_output=True, text=True,
-        ).stdout
-    )
+    mine = torch_compare.ours(a, "bench-meta", "--input", a.input, "--size", str(a.size),
+                              "--tasks", str(a.tasks), "--frames", str(a.frames))
     theirs = bench_torch(a.input, a.size, a.tasks, a.frames, a.warmup, a.steps)
-    t_med = statistics.median(theirs)
-    row = {
-        "input": a.input, "size": a.size, "tasks": a.tasks, "frames": a.frames, "threads": a.threads,
-        "steps": a.steps, "milv_median_ms": ours["median_ms"], "milv_min_ms": ours["min_ms"],
-        "torch_median_ms": t_med, "torch_min_ms": min(theirs), "ratio_median": ours["median_ms"] / t_med,
-        "torch_version": torch.__version__,
-    }
+    r = torch_compare.row(a, mine, theirs, input=a.input, size=a.size, tasks=a.tasks, frames=a.frames)
     print("| input | size | tasks × frames | threads | milv-train median ms | PyTorch eager median ms | milv / PyTorch |")
     print("|---|---:|---:|---:|---:|---:|---:|")
-    print(f"| {a.input} | {a.size} | {a.tasks} × {a.frames} | {a.threads} | {ours['median_ms']:.1f} | "
-          f"{t_med:.1f} | {row['ratio_median']:.2f}× |")
-    if a.json:
-        with open(a.json, "w") as f:
-            json.dump(row, f, indent=2)
+    print(f"| {a.input} | {a.size} | {a.tasks} × {a.frames} | {a.threads} | {r['milv_median_ms']:.1f} | "
+          f"{r['torch_median_ms']:.1f} | {r['ratio_median']:.2f}× |")
 
 
 if __name__ == "__main__":

@@ -9,17 +9,15 @@ in one run. Prints a Markdown table and writes JSON with --json.
 Usage: tools/bench/train_step.sh [--size 128] [--steps 10] [--threads 2]
 """
 
-import argparse
-import json
 import random
-import statistics
-import subprocess
 import sys
 import time
 
 import torch
 import torch.nn as nn
 import torch.nn.functional as F
+
+import torch_compare
 
 
 def inorm(x):
@@ -182,37 +180,16 @@ def bench_torch(size, warmup, steps):
 
 
 def main():
-    ap = argparse.ArgumentParser()
+    ap = torch_compare.parser(__doc__)
     ap.add_argument("--size", type=int, default=128)
-    ap.add_argument("--steps", type=int, default=10)
-    ap.add_argument("--warmup", type=int, default=2)
-    ap.add_argument("--threads", type=int, default=2)
-    ap.add_argument("--milv-train", default="target/release/milv-train")
-    ap.add_argument("--json")
     a = ap.parse_args()
     torch.set_num_threads(a.threads)
-    ours = json.loads(
-        subprocess.run(
-            [a.milv_train, "bench-step", "--size", str(a.size), "--steps", str(a.steps),
-             "--warmup", str(a.warmup), "--threads", str(a.threads), "--json"],
-            check=True, capture_output=True, text=True,
-        ).stdout
-    )
+    mine = torch_compare.ours(a, "bench-step", "--size", str(a.size))
     theirs = bench_torch(a.size, a.warmup, a.steps)
-    t_med = statistics.median(theirs)
-    row = {
-        "size": a.size, "threads": a.threads, "steps": a.steps,
-        "milv_median_ms": ours["median_ms"], "milv_min_ms": ours["min_ms"],
-        "torch_median_ms": t_med, "torch_min_ms": min(theirs),
-        "ratio_median": ours["median_ms"] / t_med,
-        "torch_version": torch.__version__,
-    }
+    r = torch_compare.row(a, mine, theirs, size=a.size)
     print("| size | threads | milv-train median ms | PyTorch eager median ms | milv / PyTorch |")
     print("|---:|---:|---:|---:|---:|")
-    print(f"| {a.size} | {a.threads} | {ours['median_ms']:.1f} | {t_med:.1f} | {row['ratio_median']:.2f}× |")
-    if a.json:
-        with open(a.json, "w") as f:
-            json.dump(row, f, indent=2)
+    print(f"| {a.size} | {a.threads} | {r['milv_median_ms']:.1f} | {r['torch_median_ms']:.1f} | {r['ratio_median']:.2f}× |")
 
 
 if __name__ == "__main__":

@@ -415,7 +415,7 @@ pub struct MetaRun {
 
 impl MetaRun {
     pub fn new(policy: PolicyConfig, cfg: MetaConfig, device: Device) -> Result<MetaRun> {
-        if cfg.meta_batch == 0 || !(cfg.lr > 0.0) {
+        if cfg.meta_batch == 0 || cfg.lr.is_nan() || cfg.lr <= 0.0 {
             return Err(Error::Config(
                 "--meta-batch must be at least 1 and --lr positive".into(),
             ));

@@ -54,6 +54,10 @@ pub struct MetaSet {
     pub digest: String,
     /// Frames with weight 0 (dropped by curation) among the outer sequences.
     pub zero_weight_frames: usize,
+    /// Standard deviation (cm) of each action component over the outer sequences' frames:
+    /// near 0 means the targets are constant (e.g. an inverse-dynamics model that has not
+    /// learned to tell imagined frames apart) and there is nothing to imitate.
+    pub action_std: Vec<f64>,
 }
 
 /// What to read.
@@ -108,6 +112,7 @@ impl MetaSet {
             families,
             digest: String::new(),
             zero_weight_frames: 0,
+            action_std: Vec::new(),
         };
         let mut parts: Vec<String> = vec!["milv-train/meta-data/1".into(), opts.variant.name().into()];
         match opts.variant {
@@ -140,6 +145,7 @@ impl MetaSet {
         );
         parts.extend(set.seqs.iter().map(|s| s.episode_id.clone()));
         set.digest = milv_data::run_id(&parts);
+        set.action_std = set.outer_action_std();
         Ok(set)
     }
 
@@ -317,6 +323,26 @@ impl MetaSet {
             self.push(&task_of(&view.episode), seq, true, true);
         }
         Ok(())
+    }
+
+    fn outer_action_std(&self) -> Vec<f64> {
+        let mut idx: Vec<usize> = self
+            .tasks
+            .values()
+            .flat_map(|t| t.outer.iter().copied())
+            .collect();
+        idx.sort_unstable();
+        idx.dedup();
+        let acts: Vec<Tensor> = idx
+            .iter()
+            .filter_map(|&i| self.seqs[i].actions.as_ref().map(Tensor::shallow_clone))
+            .collect();
+        if acts.is_empty() {
+            return Vec::new();
+        }
+        let all = Tensor::cat(&acts, 0).to_kind(tch::Kind::Double);
+        let std = all.std_dim([0i64].as_slice(), false, false);
+        Vec::try_from(std).unwrap_or_default()
     }
 
     /// Sequences in all, and frames in all.

@@ -244,27 +244,18 @@ pub fn bench_meta(
             weights: Tensor::rand([frames], o),
         })
         .collect();
-    for _ in 0..warmup {
+    let t = crate::train::time_steps(warmup, steps, &mut || {
         run.step(&batch);
-    }
-    let mut ms: Vec<f64> = (0..steps.max(1))
-        .map(|_| {
-            let t = Instant::now();
-            run.step(&batch);
-            t.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    let mean = ms.iter().sum::<f64>() / ms.len() as f64;
-    ms.sort_by(f64::total_cmp);
+    });
     Ok(MetaBench {
         input,
         input_shape,
         tasks,
         frames,
-        steps: ms.len() as u64,
-        median_ms: ms[ms.len() / 2],
-        mean_ms: mean,
-        min_ms: ms[0],
+        steps: t.steps,
+        median_ms: t.median_ms,
+        mean_ms: t.mean_ms,
+        min_ms: t.min_ms,
         threads: tch::get_num_threads(),
     })
 }

@@ -423,6 +423,25 @@ pub fn tables_markdown(records: &[EvalRecord]) -> String {
             }
         }
     }
+    s += "\nWhat each row trained on and how it was evaluated:\n\n";
+    s += "| Method | family | dataset@version | translator | meta steps | trials per task |\n|---|---|---|---|---:|---:|\n";
+    for v in &present {
+        for f in &fams {
+            if let Some(r) = find(*v, *f) {
+                s += &format!(
+                    "| {} | {} | `{}@{}` | {} | {} | {} (seeds {:?}) |\n",
+                    v.label(),
+                    f.name(),
+                    r.dataset,
+                    r.dataset_version,
+                    r.translator_model.as_deref().unwrap_or("–"),
+                    r.meta_steps,
+                    r.result.trials_per_task,
+                    r.result.seeds
+                );
+            }
+        }
+    }
     s
 }
 

@@ -258,26 +258,47 @@ pub fn bench_steps(
         yt1: img(6),
         actions: vec![0.5; model.action_dim as usize],
     };
-    for _ in 0..warmup {
+    let t = time_steps(warmup, steps, &mut || {
         run.step(&b);
+    });
+    Ok(BenchReport {
+        steps: t.steps,
+        median_ms: t.median_ms,
+        mean_ms: t.mean_ms,
+        min_ms: t.min_ms,
+        threads: tch::get_num_threads(),
+        image_size: s,
+    })
+}
+
+/// Step timings: `warmup` untimed calls of `step`, then `steps` (at least 1) timed ones.
+#[derive(Clone, Copy, Debug)]
+pub struct Timings {
+    pub steps: u64,
+    pub median_ms: f64,
+    pub mean_ms: f64,
+    pub min_ms: f64,
+}
+
+pub fn time_steps(warmup: u64, steps: u64, step: &mut dyn FnMut()) -> Timings {
+    for _ in 0..warmup {
+        step();
     }
     let mut ms: Vec<f64> = (0..steps.max(1))
         .map(|_| {
             let t = Instant::now();
-            run.step(&b);
+            step();
             t.elapsed().as_secs_f64() * 1e3
         })
         .collect();
-    let mean = ms.iter().sum::<f64>() / ms.len() as f64;
+    let mean_ms = ms.iter().sum::<f64>() / ms.len() as f64;
     ms.sort_by(f64::total_cmp);
-    Ok(BenchReport {
+    Timings {
         steps: ms.len() as u64,
         median_ms: ms[ms.len() / 2],
-        mean_ms: mean,
+        mean_ms,
         min_ms: ms[0],
-        threads: tch::get_num_threads(),
-        image_size: s,
-    })
+    }
 }
 
 /// The loader's throughput, against what training consumes.

@@ -5,32 +5,11 @@
 
 mod common;
 
+use common::{json, run, s};
+
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use milv_data::{CommitMeta, Dataset};
-
-fn run(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_milv-train"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
-
-fn json(args: &[&str]) -> serde_json::Value {
-    let (code, out, err) = run(args);
-    assert_eq!(code, 0, "{args:?}: {err}");
-    serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"))
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// A tiny A-CycleGAN checkpoint (2 steps), translated into the imagined table, scored
 /// and curated; returns the checkpoint and the curated version (a later curation

@@ -4,34 +4,12 @@
 
 mod common;
 
+use common::{json, run, s};
+
 use std::path::Path;
-use std::process::Command;
 
 use milv_data::arrow::array::{Array, BinaryArray, ListArray, StringArray};
 use milv_data::{Dataset, TableKind};
-
-fn train_bin() -> &'static str {
-    env!("CARGO_BIN_EXE_milv-train")
-}
-
-fn run(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(train_bin()).args(args).output().unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
-
-fn json(args: &[&str]) -> serde_json::Value {
-    let (code, out, err) = run(args);
-    assert_eq!(code, 0, "{args:?}: {err}");
-    serde_json::from_str(&out).unwrap_or_else(|e| panic!("{e}: {out}"))
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// `cyclegan DATASET --out RUN` with tiny networks and the default step count.
 fn fresh_run<'a>(ds: &'a Path, run: &'a Path) -> Vec<&'a str> {
@@ -164,7 +142,7 @@ fn trains_resumes_translates_and_evaluates() {
     assert_eq!(rows, fx.human_frames);
 
     let ev = json(&[
-        "eval",
+        "eval-translation",
         s(&fx.root),
         "--checkpoint",
         s(&ckpt),

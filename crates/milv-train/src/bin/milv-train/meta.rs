@@ -211,6 +211,18 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
             String::new()
         }
     );
+    let std: Vec<String> = set.action_std.iter().map(|x| format!("{x:.3}")).collect();
+    eprintln!(
+        "milv-train meta: target actions' standard deviation (cm): [{}]",
+        std.join(", ")
+    );
+    if set.action_std.iter().all(|&x| x < 0.05) {
+        eprintln!(
+            "milv-train meta: warning: the target actions are nearly constant; the policy has nothing \
+             to imitate. With imagined data this means the translator's inverse-dynamics model does not \
+             tell the translated frames apart: train the A-CycleGAN longer (check `milv-train eval-translation`)."
+        );
+    }
     let (mut run, info) = match &resumed {
         Some(dir) => {
             let (mut run, info) = meta_train::load(dir, dev)?;
