@@ -1,7 +1,8 @@
 //! Human episodes into imagined robot data (paper section 4.1): for every frame x^h,
 //! the imagined frame ŷ^r = G(x^h), its latent ẑ^r = E_F(ŷ^r) from F's encoder and the
-//! imagined action â^r_t = π_I(ẑ^r_t, ẑ^r_t+1) (the last frame gets π_I(ẑ_T, ẑ_T), the
-//! model's action for "no change"), committed as the `imagined` table of one model.
+//! imagined action â^r_t = π_I(ŷ^r_t, ŷ^r_t+1) read through π_I's encoder (F's when
+//! coupled, its own when decoupled; the last frame gets π_I(ŷ_T, ŷ_T), the model's action
+//! for "no change"), committed as the `imagined` table of one model.
 //!
 //! Episodes stream one at a time through chunks of frames, so memory stays bounded by
 //! one episode's encoded frames and one chunk of tensors.
@@ -211,7 +212,9 @@ fn translate_clip(
     let shape: Vec<i32> = cfg.latent_shape().iter().map(|&d| d as i32).collect();
     // Each chunk needs the latent of the next chunk's first frame for its last action, so
     // chunks are translated one ahead.
-    let run_chunk = |range: std::ops::Range<usize>| -> Result<(Tensor, Tensor)> {
+    // π_I reads the latents of its own encoder: F's when coupled, its own when decoupled
+    // (DeGI), exactly as in training ([`Nets::predict_action`]).
+    let run_chunk = |range: std::ops::Range<usize>| -> Result<(Tensor, Tensor, Tensor)> {
         let mut data = Vec::with_capacity(range.len() * 3 * (size * size) as usize);
         for t in range.clone() {
             data.extend(clip.tensor_data(t, size)?);
@@ -222,7 +225,11 @@ fn translate_clip(
         Ok(tch::no_grad(|| {
             let y = nets.g.forward(&x);
             let z = nets.f.encode(&y);
-            (y, z)
+            let zi = match &nets.idm_encoder {
+                Some(e) => e.forward(&y),
+                None => z.shallow_clone(),
+            };
+            (y, z, zi)
         }))
     };
     let chunk = opts.chunk.max(1);
@@ -235,15 +242,15 @@ fn translate_clip(
             Some(&s) => Some(run_chunk(s..(s + chunk).min(n))?),
             None => None,
         };
-        let (y, z) = &cur;
-        // z_{t+1} for every frame of the chunk: the chunk shifted by one, then the next
-        // chunk's first latent (or the last latent again at the end of the clip).
+        let (y, z, zi) = &cur;
+        // π_I's latent of t+1 for every frame of the chunk: the chunk shifted by one, then
+        // the next chunk's first latent (or the last latent again at the end of the clip).
         let tail = match &next {
-            Some((_, zn)) => zn.narrow(0, 0, 1),
-            None => z.narrow(0, z.size()[0] - 1, 1),
+            Some((_, _, zn)) => zn.narrow(0, 0, 1),
+            None => zi.narrow(0, zi.size()[0] - 1, 1),
         };
-        let z_next = Tensor::cat(&[z.narrow(0, 1, z.size()[0] - 1), tail], 0);
-        let actions = tch::no_grad(|| nets.idm.forward(z, &z_next)).to_kind(Kind::Float);
+        let z_next = Tensor::cat(&[zi.narrow(0, 1, zi.size()[0] - 1), tail], 0);
+        let actions = tch::no_grad(|| nets.idm.forward(zi, &z_next)).to_kind(Kind::Float);
         let actions: Vec<f32> = Vec::try_from(actions.to_device(tch::Device::Cpu).contiguous().view([-1]))?;
         let latents = z
             .to_kind(opts.latent.kind())
@@ -286,4 +293,79 @@ fn translate_clip(
         }
     }
     Ok(n as u64)
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use milv_data::arrow::array::{Array, Float32Array, ListArray};
+    use milv_data::frame_codec::{FrameEncoding, encode};
+
+    /// The stored actions are π_I's on consecutive translated frames, through the encoder
+    /// π_I trained on — for a decoupled model its own, not F's.
+    #[test]
+    fn imagined_actions_are_pi_i_on_consecutive_translations_coupled_or_not() {
+        let _serial = crate::testing::torch_rng();
+        let cfg = ModelConfig::tiny(32);
+        for decoupled in [false, true] {
+            let nets = Nets::new(&cfg, decoupled, tch::Device::Cpu);
+            let n = 5usize;
+            let rgbs: Vec<Vec<u8>> = (0..n)
+                .map(|i| (0..32 * 32 * 3).map(|k| ((k * 7 + i * 53) % 251) as u8).collect())
+                .collect();
+            let frames = rgbs
+                .iter()
+                .map(|f| {
+                    let mut png = Vec::new();
+                    encode(FrameEncoding::Png, f, 32, 32, &mut png).unwrap();
+                    png
+                })
+                .collect();
+            let clip = crate::data::Clip {
+                episode_id: "e".into(),
+                encoding: FrameEncoding::Png,
+                width: 32,
+                height: 32,
+                frames,
+                timestamps: (0..n as i64).collect(),
+                actions: None,
+            };
+            let opts = TranslateOptions {
+                chunk: 2,
+                ..TranslateOptions::default()
+            };
+            let mut got: Vec<f32> = Vec::new();
+            translate_clip(&nets, &cfg, "m", &opts, &clip, &mut |rows| {
+                let b = rows.finish()?;
+                let a = b
+                    .column_by_name("action")
+                    .unwrap()
+                    .as_any()
+                    .downcast_ref::<ListArray>()
+                    .unwrap();
+                for i in 0..b.num_rows() {
+                    let v = a.value(i);
+                    got.extend(v.as_any().downcast_ref::<Float32Array>().unwrap().values().iter());
+                }
+                Ok(())
+            })
+            .unwrap();
+            let data: Vec<f32> = (0..n).flat_map(|t| clip.tensor_data(t, 32).unwrap()).collect();
+            let x = Tensor::from_slice(&data).view([n as i64, 3, 32, 32]);
+            let want = tch::no_grad(|| {
+                let y = nets.g.forward(&x);
+                let next = Tensor::cat(&[y.narrow(0, 1, n as i64 - 1), y.narrow(0, n as i64 - 1, 1)], 0);
+                nets.predict_action(&y, &next)
+            });
+            let want: Vec<f32> = Vec::try_from(want.contiguous().view([-1])).unwrap();
+            assert_eq!(got.len(), want.len());
+            let err = got
+                .iter()
+                .zip(&want)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max);
+            assert!(err < 1e-5, "decoupled {decoupled}: actions differ by {err}");
+        }
+    }
 }
