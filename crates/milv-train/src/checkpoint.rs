@@ -100,19 +100,35 @@ pub fn write_dir(dir: &Path, name: &str, fill: &mut dyn FnMut(&Path) -> Result<(
     Ok(fin)
 }
 
-/// Reads a checkpoint's metadata, checking that every file it needs is there.
-pub fn read_meta(dir: &Path) -> Result<CheckpointMeta> {
-    let cj = dir.join("checkpoint.json");
-    let bytes = std::fs::read(&cj).map_err(|e| Error::io(&cj, e))?;
-    let meta: CheckpointMeta = serde_json::from_slice(&bytes)
-        .map_err(|e| Error::Checkpoint(format!("{}: not a checkpoint: {e}", cj.display())))?;
-    if meta.format != FORMAT {
+/// Reads a checkpoint's JSON metadata (`what` names it in errors) and checks that its
+/// `format` field is `expected`.
+pub fn read_json_format<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    what: &str,
+    expected: &str,
+    format: impl Fn(&T) -> &str,
+) -> Result<T> {
+    let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    let meta: T = serde_json::from_slice(&bytes)
+        .map_err(|e| Error::Checkpoint(format!("{}: not {what}: {e}", path.display())))?;
+    if format(&meta) != expected {
         return Err(Error::Checkpoint(format!(
-            "{}: format {:?}, expected {FORMAT:?}",
-            cj.display(),
-            meta.format
+            "{}: format {:?}, expected {expected:?}",
+            path.display(),
+            format(&meta)
         )));
     }
+    Ok(meta)
+}
+
+/// Reads a checkpoint's metadata, checking that every file it needs is there.
+pub fn read_meta(dir: &Path) -> Result<CheckpointMeta> {
+    let meta: CheckpointMeta = read_json_format(
+        &dir.join("checkpoint.json"),
+        "a checkpoint",
+        FORMAT,
+        |m: &CheckpointMeta| &m.format,
+    )?;
     for n in NET_FILES
         .iter()
         .map(|n| format!("{n}.safetensors"))

@@ -82,17 +82,12 @@ pub fn read_meta(path: &Path) -> Result<(PathBuf, PolicyMeta)> {
             ))
         })?
     };
-    let pj = dir.join("policy.json");
-    let bytes = std::fs::read(&pj).map_err(|e| Error::io(&pj, e))?;
-    let meta: PolicyMeta = serde_json::from_slice(&bytes)
-        .map_err(|e| Error::Checkpoint(format!("{}: not a policy checkpoint: {e}", pj.display())))?;
-    if meta.format != FORMAT {
-        return Err(Error::Checkpoint(format!(
-            "{}: format {:?}, expected {FORMAT:?}",
-            pj.display(),
-            meta.format
-        )));
-    }
+    let meta: PolicyMeta = crate::checkpoint::read_json_format(
+        &dir.join("policy.json"),
+        "a policy checkpoint",
+        FORMAT,
+        |m: &PolicyMeta| &m.format,
+    )?;
     for f in ["policy.safetensors", "state.safetensors"] {
         if !dir.join(f).is_file() {
             return Err(Error::Checkpoint(format!("{}: {f} is missing", dir.display())));
