@@ -373,11 +373,15 @@ mod tests {
         for _ in 0..400 {
             last = r.step(&b);
         }
-        // The reconstruction and inverse-dynamics losses fall by 10× or more. Mapping one
+        // The reconstruction and inverse-dynamics losses fall several-fold. Mapping one
         // random image onto an unrelated one (aux) is slower for a convolutional net, whose
         // outputs depend on local input patterns: it must fall, by less.
+        // The cycle loss after 400 adversarial steps depends on libtorch's CPU kernels
+        // (measured 1.156 → under 0.116 with AVX-512, 0.127 with AVX2, 0.145 with the baseline
+        // kernels, 0.143–0.163 on an Intel Xeon: 7–10×), so the bar is 4×. Broken learning
+        // stays far below it: without the cycle term 1.3×, at a tenth of the rate 2.6×.
         assert!(
-            last.cycle < first.cycle / 10.0,
+            last.cycle < first.cycle / 4.0,
             "cycle {} -> {}",
             first.cycle,
             last.cycle
@@ -428,7 +432,6 @@ mod tests {
     #[test]
     fn a_checkpoint_round_trips_and_resumes_exactly() {
         let _serial = crate::testing::torch_rng();
-        tch::set_num_threads(1);
         let dir = tempfile::tempdir().unwrap();
         let data = crate::checkpoint::DataRef {
             uri: "ds".into(),

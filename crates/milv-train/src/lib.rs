@@ -76,8 +76,12 @@ pub(crate) mod testing {
 
     /// libtorch's initialisation and `rand` draw from one global generator: unit tests
     /// that create networks or random tensors hold this, so a test comparing two runs
-    /// sees no other test draw in between.
+    /// sees no other test draw in between. It also pins libtorch to one intra-op thread
+    /// (a global setting), so no test's numbers depend on the core count, on how a
+    /// multi-threaded reduction split its work, or on which test ran before it.
     pub fn torch_rng() -> MutexGuard<'static, ()> {
-        TORCH_RNG.lock().unwrap_or_else(|e| e.into_inner())
+        let guard = TORCH_RNG.lock().unwrap_or_else(|e| e.into_inner());
+        tch::set_num_threads(1);
+        guard
     }
 }
