@@ -8,7 +8,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 tools/setup.sh
 
-BIN=target/debug
+BIN=${MILV_BIN:-target/debug}
 OUT=${MILV_DEMO_OUT:-out/demo}
 DS="$OUT/dataset"
 rm -rf "$OUT"

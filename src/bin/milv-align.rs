@@ -161,6 +161,14 @@ fn run_align(a: RunArgs) -> anyhow::Result<u8> {
     }
     if a.json {
         cli::print_json(&rep)?;
+    } else if rep.pairs.is_empty() && rep.failed.is_empty() && rep.already_aligned > 0 {
+        println!(
+            "{}@{}: run {} already aligned all {} selected pairs; nothing to do",
+            ds.root().display(),
+            rep.version,
+            rep.run_id,
+            rep.already_aligned
+        );
     } else {
         println!(
             "{}@{}: aligned {} pairs on {} features ({} rows, run {}, read @{})",

@@ -224,6 +224,9 @@ fn run(args: Args) -> anyhow::Result<u8> {
                 for p in &rep.problems {
                     println!("problem: {p}");
                 }
+                for d in &rep.duplicates {
+                    println!("warning: {d}");
+                }
                 println!(
                     "{}@{}: {} files, {} rows, {} frames decoded: {}",
                     ds.root().display(),

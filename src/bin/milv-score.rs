@@ -44,7 +44,7 @@ enum Cmd {
         episodes: Vec<String>,
         /// Only this domain: human or robot (default: both).
         #[arg(long)]
-        domain: Option<String>,
+        domain: Option<milv::data::Domain>,
         /// Episodes scored at once (default: all cores).
         #[arg(long)]
         jobs: Option<usize>,
@@ -199,7 +199,7 @@ fn score_run(
     table: SourceArg,
     model_id: Option<String>,
     episodes: Vec<String>,
-    domain: Option<String>,
+    domain: Option<milv::data::Domain>,
     jobs: Option<usize>,
     partition: Option<Partition>,
     skip_bad: bool,
@@ -372,6 +372,14 @@ fn run(args: Args) -> anyhow::Result<u8> {
             let r = curate(&ds, &opts, CommitMeta::for_this_process("milv-score", "curate"))?;
             if json {
                 cli::print_json(&r)?;
+            } else if r.unchanged {
+                println!(
+                    "{}@{}: the curated view already is curation {} (run {}); nothing to do",
+                    ds.root().display(),
+                    r.version,
+                    r.curation_id,
+                    r.run_id
+                );
             } else {
                 println!(
                     "{}@{}: curated {} of {} frames, {} of {} episodes (weight >= {:.6}, mean kept weight {:.4}; run {}, curation {})",

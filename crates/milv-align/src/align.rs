@@ -1,11 +1,10 @@
 //! Aligning every pair of a dataset version and committing the `alignments` table.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::sync::Arc;
 
-use milv_data::arrow::array::{Array, ArrayRef, Float64Array, Int32Array, RecordBatch, StringArray};
-use milv_data::frame_codec::FrameEncoding;
-use milv_data::{CommitMeta, Dataset, Episode, Partition, ShardOptions, TableKind, ops};
+use milv_data::{
+    AlignmentRow, CommitMeta, Dataset, Domain, Episode, Partition, ShardOptions, TableKind, ops,
+};
 use rayon::prelude::*;
 use serde::Serialize;
 
@@ -84,6 +83,8 @@ pub struct AlignReport {
     /// Mean of the pairs' mean frame errors (with ground truth).
     pub mean_frame_error: Option<f64>,
     pub max_frame_error: Option<usize>,
+    /// Pairs this run had already aligned (a re-run is a no-op).
+    pub already_aligned: usize,
 }
 
 /// The two episodes of each pair, or why the pair is unusable.
@@ -99,8 +100,8 @@ fn pairs_of(episodes: &[Episode]) -> BTreeMap<String, std::result::Result<(Episo
         .map(|(p, eps)| {
             let r = match eps.as_slice() {
                 [a, b] => {
-                    let (h, r) = if a.domain == "human" { (a, b) } else { (b, a) };
-                    if h.domain != "human" || r.domain != "robot" {
+                    let (h, r) = if a.domain == Domain::Human { (a, b) } else { (b, a) };
+                    if h.domain != Domain::Human || r.domain != Domain::Robot {
                         Err(format!(
                             "both episodes are {} (a pair needs one human and one robot)",
                             a.domain
@@ -113,7 +114,7 @@ fn pairs_of(episodes: &[Episode]) -> BTreeMap<String, std::result::Result<(Episo
                     "only a {} episode ({}): its {} episode is missing",
                     one.domain,
                     one.episode_id,
-                    if one.domain == "human" { "robot" } else { "human" }
+                    one.domain.other()
                 )),
                 many => Err(format!(
                     "{} episodes share this pair id (a pair needs exactly 2)",
@@ -123,12 +124,6 @@ fn pairs_of(episodes: &[Episode]) -> BTreeMap<String, std::result::Result<(Episo
             (p, r)
         })
         .collect()
-}
-
-fn col<'a, T: 'static>(b: &'a RecordBatch, name: &str) -> Result<&'a T> {
-    b.column_by_name(name)
-        .and_then(|c| c.as_any().downcast_ref::<T>())
-        .ok_or_else(|| Error::Invalid(format!("column {name} missing or of an unexpected type")))
 }
 
 /// Reads the clips of `wanted` episodes from `table` (frames, or imagined of `model`).
@@ -148,8 +143,8 @@ fn load_clips(
             let ep = wanted[&id];
             let clip = Clip {
                 episode_id: id.clone(),
-                domain: ep.domain.clone(),
-                encoding: FrameEncoding::from_name(&ep.frame_encoding).unwrap_or(FrameEncoding::Png),
+                domain: ep.domain,
+                encoding: ep.frame_encoding,
                 // Imagined frames are PNGs of the model's size: decode without a size check.
                 width: if imagined { 0 } else { ep.width as u32 },
                 height: if imagined { 0 } else { ep.height as u32 },
@@ -163,25 +158,11 @@ fn load_clips(
 
 /// The only translation model of the imagined table, or the one asked for.
 fn resolve_model(ds: &Dataset, v: u64, wanted: Option<&str>) -> Result<String> {
-    let mut models = BTreeSet::new();
-    for b in ds.scan(TableKind::Imagined, v, Some(&["model_id"]))? {
-        let b = b?;
-        let m: &StringArray = col(&b, "model_id")?;
-        models.extend((0..b.num_rows()).map(|i| m.value(i).to_string()));
-    }
-    match wanted {
-        Some(w) if models.contains(w) => Ok(w.to_string()),
-        _ if models.is_empty() => Err(Error::Invalid(format!(
+    match milv_data::resolve_model(ds, v, wanted)? {
+        Some((m, _)) => Ok(m),
+        None => Err(Error::Invalid(format!(
             "--features translated needs translated human frames, and version {v} has no imagined rows \
              (run `milv-train translate` first)"
-        ))),
-        Some(w) => Err(Error::Invalid(format!(
-            "model {w} has no imagined rows at version {v}"
-        ))),
-        None if models.len() == 1 => Ok(models.into_iter().next().unwrap_or_default()),
-        None => Err(Error::Invalid(format!(
-            "the imagined table holds {} models; choose one with --model-id",
-            models.len()
         ))),
     }
 }
@@ -303,16 +284,32 @@ pub fn align_dataset(
         }
         pairs.retain(|p, _| want.contains(p));
     }
+    let model = match kind.human_source() {
+        ClipSource::Imagined if !pairs.is_empty() => Some(resolve_model(ds, v, opts.model_id.as_deref())?),
+        _ => None,
+    };
+    // The run is named by what it reads and its options, before partitioning, so the
+    // workers of a partitioned run share it, and a re-run finds its pairs done.
+    let mut parts = vec![
+        "milv-align/1".to_string(),
+        kind.name().into(),
+        format!("{:?}", opts.step),
+        opts.band.to_string(),
+    ];
+    parts.extend(model.clone());
+    parts.extend(ds.files(TableKind::Frames, v)?.into_iter().map(|f| f.info.path));
+    parts.extend(pairs.keys().cloned());
+    let run_id = milv_data::run_id(&parts);
     pairs.retain(|p, _| opts.partition.is_none_or(|part| part.contains_key(p)));
     if pairs.is_empty() {
         return Err(Error::Invalid(format!(
             "no paired episodes (pair_id) to align at version {v}"
         )));
     }
-    let model = match kind.human_source() {
-        ClipSource::Imagined => Some(resolve_model(ds, v, opts.model_id.as_deref())?),
-        ClipSource::Frames => None,
-    };
+    let done = milv_data::run_groups(ds, ds.latest_version()?, TableKind::Alignments, &run_id)?;
+    let selected = pairs.len();
+    pairs.retain(|p, _| !done.contains(p));
+    let already_aligned = selected - pairs.len();
     let mut failed: Vec<PairError> = Vec::new();
     let mut good: Vec<(&String, &Episode, &Episode)> = Vec::new();
     for (p, r) in &pairs {
@@ -395,16 +392,6 @@ pub fn align_dataset(
         }
     }
     failed.sort_by(|a, b| a.pair_id.cmp(&b.pair_id));
-    let mut parts = vec![
-        "milv-align/1".to_string(),
-        kind.name().into(),
-        format!("{:?}", opts.step),
-        opts.band.to_string(),
-    ];
-    parts.extend(model.clone());
-    parts.extend(ds.files(TableKind::Frames, v)?.into_iter().map(|f| f.info.path));
-    parts.extend(pairs.keys().cloned());
-    let run_id = milv_data::run_id(&parts);
     let with_truth: Vec<&PairSummary> = aligned
         .iter()
         .map(|(s, _)| s)
@@ -422,6 +409,7 @@ pub fn align_dataset(
             with_truth.iter().filter_map(|s| s.mean_frame_error).sum::<f64>() / with_truth.len() as f64
         }),
         max_frame_error: with_truth.iter().filter_map(|s| s.max_frame_error).max(),
+        already_aligned,
     };
     if aligned.is_empty() {
         return Ok(report);
@@ -432,38 +420,39 @@ pub fn align_dataset(
         "untrusted": report.pairs.iter().filter(|p| !p.trusted).map(|p| &p.pair_id).collect::<Vec<_>>(),
     });
     let mut txn = ds.begin(meta)?;
-    let mut w = txn.shard_writer(TableKind::Alignments, ShardOptions::default())?;
-    let mut ids = Vec::new();
-    let written = (|| -> Result<()> {
-        for (s, al) in &aligned {
-            w.begin_episode()?;
-            w.push(rows_batch(s, al, kind.name(), &run_id)?)?;
-            w.end_episode()?;
-            ids.push(s.pair_id.clone());
-        }
-        Ok(())
-    })();
+    let written = txn.write_groups(
+        TableKind::Alignments,
+        Some(&run_id),
+        ShardOptions::default(),
+        |w| -> Result<()> {
+            for (s, al) in &aligned {
+                w.group(&s.pair_id, &alignment_rows(s, al, kind.name(), &run_id))?;
+            }
+            Ok(())
+        },
+    );
     if let Err(e) = written {
-        w.abort();
         txn.abort();
         return Err(e);
     }
-    txn.add_files(TableKind::Alignments, w.finish()?, ids);
     report.version = txn.commit()?;
     Ok(report)
 }
 
-fn rows_batch(s: &PairSummary, al: &Alignment, features: &str, run_id: &str) -> Result<RecordBatch> {
-    let n = al.path.len();
-    let cols: Vec<ArrayRef> = vec![
-        Arc::new(StringArray::from(vec![s.pair_id.as_str(); n])),
-        Arc::new(StringArray::from(vec![s.human_episode_id.as_str(); n])),
-        Arc::new(Int32Array::from_iter_values(al.path.iter().map(|p| p.0 as i32))),
-        Arc::new(StringArray::from(vec![s.robot_episode_id.as_str(); n])),
-        Arc::new(Int32Array::from_iter_values(al.path.iter().map(|p| p.1 as i32))),
-        Arc::new(Float64Array::from(al.local.clone())),
-        Arc::new(StringArray::from(vec![features; n])),
-        Arc::new(StringArray::from(vec![run_id; n])),
-    ];
-    Ok(RecordBatch::try_new(TableKind::Alignments.arrow_schema(), cols)?)
+/// The `alignments` rows of one aligned pair: its DTW path with each cell's local cost.
+fn alignment_rows(s: &PairSummary, al: &Alignment, features: &str, run_id: &str) -> Vec<AlignmentRow> {
+    al.path
+        .iter()
+        .zip(&al.local)
+        .map(|(&(h, r), &cost)| AlignmentRow {
+            pair_id: s.pair_id.clone(),
+            human_episode_id: s.human_episode_id.clone(),
+            human_frame: h as i32,
+            robot_episode_id: s.robot_episode_id.clone(),
+            robot_frame: r as i32,
+            cost,
+            features: features.to_string(),
+            run_id: run_id.to_string(),
+        })
+        .collect()
 }

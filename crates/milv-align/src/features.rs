@@ -16,7 +16,7 @@ use crate::{Error, motion};
 #[derive(Clone, Debug)]
 pub struct Clip {
     pub episode_id: String,
-    pub domain: String,
+    pub domain: milv_data::Domain,
     pub encoding: FrameEncoding,
     pub width: u32,
     pub height: u32,
@@ -336,7 +336,7 @@ mod tests {
             .collect();
         Clip {
             episode_id: "e".into(),
-            domain: "human".into(),
+            domain: milv_data::Domain::Human,
             encoding: FrameEncoding::Png,
             width: w as u32,
             height: h as u32,

@@ -25,8 +25,6 @@ pub use features::{Clip, FeatureKind};
 pub enum Error {
     #[error(transparent)]
     Data(#[from] milv_data::Error),
-    #[error("arrow: {0}")]
-    Arrow(#[from] milv_data::arrow::error::ArrowError),
     #[error("{0}")]
     Invalid(String),
 }

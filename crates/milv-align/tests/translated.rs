@@ -3,16 +3,9 @@
 //! recovers that correspondence exactly.
 #![allow(clippy::unwrap_used)]
 
-use std::sync::Arc;
-
 use milv_align::{AlignOptions, StepPattern, align_dataset, features};
-use milv_data::arrow::array::{
-    ArrayRef, BinaryArray, Int32Array, Int64Array, RecordBatch, StringArray, new_null_array,
-};
-use milv_data::arrow::datatypes::DataType;
-use milv_data::frame_codec::{FrameEncoding, encode};
-use milv_data::schema::list_of;
-use milv_data::{CommitMeta, Dataset, Episode, FrameRows, ShardOptions, TableKind};
+use milv_data::{CommitMeta, Dataset, Domain, Episode, Kind};
+use milv_fixtures::{Frame, ImaginedFrame, commit_episodes, commit_imagined};
 
 const W: u32 = 32;
 
@@ -34,35 +27,18 @@ fn frame(k: usize) -> Vec<u8> {
 }
 
 fn png(rgb: &[u8]) -> Vec<u8> {
-    let mut out = Vec::new();
-    encode(FrameEncoding::Png, rgb, W, W, &mut out).unwrap();
-    out
+    milv_fixtures::png(rgb, W, W)
 }
 
-fn episode(id: &str, domain: &str, n: usize) -> Episode {
-    Episode {
-        episode_id: id.into(),
-        domain: domain.into(),
-        kind: "paired".into(),
+fn episode(id: &str, domain: Domain, frames: &[Vec<u8>]) -> (Episode, Vec<Frame>) {
+    let e = Episode {
+        kind: Kind::Paired,
         task_id: None,
         task_family: None,
         pair_id: Some("p".into()),
-        split: "train".into(),
-        n_frames: n as i64,
-        fps: 10.0,
-        width: W as i32,
-        height: W as i32,
-        frame_encoding: "png".into(),
-        action_dim: None,
-        state_dim: None,
-        action_names: None,
-        state_names: None,
-        source_uri: format!("{id}.mp4"),
-        source_sha256: "ab".into(),
-        sidecar_uri: None,
-        duration_ns: 0,
-        ingested_at_us: 0,
-    }
+        ..milv_fixtures::episode(id, domain, frames.len(), (W, W))
+    };
+    (e, frames.iter().map(|f| Frame::image(png(f))).collect())
 }
 
 #[test]
@@ -73,45 +49,17 @@ fn translated_frames_align_to_the_robot_frames_they_show() {
     let truth: Vec<usize> = (0..20)
         .map(|i| ((i as f64 / 19.0).powf(1.3) * 29.0).round() as usize)
         .collect();
-    let mut txn = ds.begin(meta()).unwrap();
-    let mut w = txn
-        .shard_writer(TableKind::Frames, ShardOptions::default())
-        .unwrap();
-    for (id, frames) in [
-        (
-            "human",
-            (0..20)
-                .map(|_| vec![128u8; (W * W * 3) as usize])
-                .collect::<Vec<_>>(),
-        ),
-        ("robot", (0..30).map(frame).collect()),
-    ] {
-        w.begin_episode().unwrap();
-        let mut rows = FrameRows::new();
-        for (i, f) in frames.iter().enumerate() {
-            rows.push(id, i as i32, 0, &png(f), None, None);
-        }
-        w.push(rows.finish().unwrap()).unwrap();
-        w.end_episode().unwrap();
-    }
-    let files = w.finish().unwrap();
-    txn.add_files(TableKind::Frames, files, vec!["human".into(), "robot".into()]);
-    let mut ew = txn
-        .shard_writer(TableKind::Episodes, ShardOptions::default())
-        .unwrap();
-    ew.begin_episode().unwrap();
-    ew.push(
-        milv_data::episodes_to_batch(&[episode("human", "human", 20), episode("robot", "robot", 30)])
-            .unwrap(),
+    let human: Vec<Vec<u8>> = (0..20).map(|_| vec![128u8; (W * W * 3) as usize]).collect();
+    let robot: Vec<Vec<u8>> = (0..30).map(frame).collect();
+    commit_episodes(
+        &ds,
+        &[
+            episode("human", Domain::Human, &human),
+            episode("robot", Domain::Robot, &robot),
+        ],
+        meta(),
     )
     .unwrap();
-    ew.end_episode().unwrap();
-    txn.add_files(
-        TableKind::Episodes,
-        ew.finish().unwrap(),
-        vec!["human".into(), "robot".into()],
-    );
-    txn.commit().unwrap();
 
     let opts = AlignOptions {
         step: StepPattern::Asymmetric,
@@ -124,29 +72,14 @@ fn translated_frames_align_to_the_robot_frames_they_show() {
     assert!(err.to_string().contains("milv-train translate"), "{err}");
 
     // The imagined table: human frame i "translated" to the robot frame it shows.
-    let images: Vec<Vec<u8>> = truth.iter().map(|&j| png(&frame(j))).collect();
-    let n = images.len();
-    let cols: Vec<ArrayRef> = vec![
-        Arc::new(StringArray::from(vec!["human"; n])),
-        Arc::new(Int32Array::from_iter_values(0..n as i32)),
-        Arc::new(Int64Array::from_iter_values(0..n as i64)),
-        Arc::new(StringArray::from(vec!["model-x"; n])),
-        Arc::new(BinaryArray::from_iter_values(images.iter().map(Vec::as_slice))),
-        new_null_array(&DataType::Binary, n),
-        new_null_array(&DataType::Utf8, n),
-        new_null_array(&list_of(DataType::Int32), n),
-        new_null_array(&list_of(DataType::Float32), n),
-    ];
-    let mut txn = ds.begin(meta()).unwrap();
-    let mut w = txn
-        .shard_writer(TableKind::Imagined, ShardOptions::default())
-        .unwrap();
-    w.begin_episode().unwrap();
-    w.push(RecordBatch::try_new(TableKind::Imagined.arrow_schema(), cols).unwrap())
-        .unwrap();
-    w.end_episode().unwrap();
-    txn.add_files(TableKind::Imagined, w.finish().unwrap(), vec!["human".into()]);
-    txn.commit().unwrap();
+    let translated: Vec<ImaginedFrame> = truth
+        .iter()
+        .map(|&j| ImaginedFrame {
+            image: png(&frame(j)),
+            ..ImaginedFrame::default()
+        })
+        .collect();
+    commit_imagined(&ds, "model-x", &[("human", translated)], meta()).unwrap();
 
     let rep = align_dataset(&ds, None, kind, &opts, meta(), &|| {}).unwrap();
     assert_eq!(rep.pairs.len(), 1, "{:?}", rep.failed);

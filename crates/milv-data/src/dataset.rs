@@ -365,6 +365,10 @@ pub struct Transaction<'a> {
 }
 
 impl Transaction<'_> {
+    pub(crate) fn dataset(&self) -> &Dataset {
+        self.ds
+    }
+
     pub fn base_version(&self) -> u64 {
         self.base
     }

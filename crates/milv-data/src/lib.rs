@@ -8,7 +8,9 @@
 //! | module | what it holds |
 //! |---|---|
 //! | [`schema`] | [`TableKind`], the column lists, Arrow schemas, the `schemas/v1` JSON |
-//! | [`rows`] | typed rows ([`Episode`]) and batch builders ([`FrameRows`]) |
+//! | [`rows`] | typed rows of every table ([`Episode`] with [`Domain`], [`Kind`], [`Split`]; [`ScoreRow`], [`CuratedRow`], [`AlignmentRow`]) and batch builders ([`FrameRows`], [`ImaginedRows`]) |
+//! | [`write`] | [`GroupWriter`]: adds a table's rows group by group; a run's groups are written once |
+//! | [`read`] | whole episodes, translation models, a scoring run, a curation, an alignment run |
 //! | [`dataset`] | [`Dataset`] (open `PATH` / `PATH@N`, list files, scan) and [`Transaction`] |
 //! | [`frame_codec`] | PNG / JPEG / raw encoding of the `image` column |
 //! | [`shard`] | [`ShardWriter`]: zstd Parquet files of bounded size, episode-aligned row groups |
@@ -38,6 +40,7 @@
 //! assert_eq!(r.version, Some(3));
 //! ```
 
+mod columns;
 pub mod dataset;
 mod delta;
 pub mod error;
@@ -50,15 +53,23 @@ pub mod rows;
 pub mod schema;
 pub mod shard;
 pub mod view;
+pub mod write;
 
 pub use dataset::{Dataset, DatasetRef, TableFile, Transaction};
 pub use error::{Error, Result};
 pub use log::{CommitMeta, FileAdd, InputDigest, TableChange, VersionEntry, run_id};
 pub use partition::Partition;
-pub use read::{AlignedPair, AlignmentRun, EpisodeRows, ScoreRow, alignment_run, episode_rows, score_run};
-pub use rows::{Episode, FrameRows, ImaginedRow, ImaginedRows, episodes_from_batches, episodes_to_batch};
+pub use read::{
+    AlignedPair, AlignmentRun, DuplicateGroup, EpisodeRows, alignment_run, episode_rows, imagined_models,
+    resolve_model, run_groups, score_run,
+};
+pub use rows::{
+    AlignmentRow, CuratedRow, Domain, Episode, FrameEncoding, FrameRows, ImaginedRecord, ImaginedRow,
+    ImaginedRows, Kind, Latent, Row, RowBuffer, ScoreRow, Split, episodes_from_batches, episodes_to_batch,
+};
 pub use schema::{ColType, Column, SCHEMA_VERSION, TableKind};
 pub use shard::{ClosedShard, ShardOptions, ShardWriter};
+pub use write::{GroupWriter, Written};
 
 /// Re-exported so callers use the exact Arrow/Parquet versions the tables are written with.
 pub use deltalake::{arrow, parquet};

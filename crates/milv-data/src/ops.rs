@@ -4,10 +4,11 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use deltalake::arrow::array::{Array, BooleanArray, Int32Array, RecordBatch};
+use deltalake::arrow::array::{Array, BinaryArray, BooleanArray, Int32Array, RecordBatch};
 use deltalake::arrow::compute::filter_record_batch;
 use serde::Serialize;
 
+use crate::columns::column;
 use crate::dataset::{Dataset, TableFile, Transaction};
 use crate::error::{Error, Result};
 use crate::frame_codec;
@@ -98,6 +99,9 @@ pub struct VerifyReport {
     /// (version, table) pairs logged but not yet committed to Delta.
     pub pending: Vec<(u64, TableKind)>,
     pub problems: Vec<String>,
+    /// Groups a run wrote more than once (by tools older than the idempotent writer):
+    /// readers use the first copy, so they are warnings, not problems.
+    pub duplicates: Vec<crate::read::DuplicateGroup>,
 }
 
 impl VerifyReport {
@@ -192,6 +196,7 @@ pub fn verify(ds: &Dataset, version: u64, mut progress: impl FnMut(u64)) -> Resu
             "frames of episode {id} have no row in the episodes table"
         ));
     }
+    rep.duplicates = crate::read::duplicate_groups(ds, version)?;
     Ok(rep)
 }
 
@@ -226,26 +231,20 @@ fn check_frames(
 ) -> Result<()> {
     let bad = |msg: String| Error::Invalid(format!("{msg}: {}", f.abs_path.display()));
     let ids = episode_ids(batch).ok_or_else(|| bad("episode_id column unreadable".into()))?;
-    let idx = batch
-        .column_by_name("frame_index")
-        .and_then(|c| c.as_any().downcast_ref::<Int32Array>())
-        .ok_or_else(|| bad("frame_index column unreadable".into()))?;
-    let images = batch
-        .column_by_name("image")
-        .and_then(|c| c.as_any().downcast_ref::<deltalake::arrow::array::BinaryArray>())
-        .ok_or_else(|| bad("image column unreadable".into()))?;
+    let unreadable = |e: Error| bad(e.to_string());
+    let idx: &Int32Array = column(batch, "frame_index", f.table).map_err(unreadable)?;
+    let images: &BinaryArray = column(batch, "image", f.table).map_err(unreadable)?;
     for i in 0..batch.num_rows() {
         let id = ids.value(i);
         seen.entry(id.to_string()).or_default().push(idx.value(i));
         let Some(ep) = episodes.get(id) else { continue };
-        let enc = frame_codec::FrameEncoding::from_name(&ep.frame_encoding).ok_or_else(|| {
-            bad(format!(
-                "episode {id}: unknown frame encoding {}",
-                ep.frame_encoding
-            ))
-        })?;
-        frame_codec::decode(enc, images.value(i), ep.width as u32, ep.height as u32)
-            .map_err(|e| bad(format!("episode {id} frame {}: {e}", idx.value(i))))?;
+        frame_codec::decode(
+            ep.frame_encoding,
+            images.value(i),
+            ep.width as u32,
+            ep.height as u32,
+        )
+        .map_err(|e| bad(format!("episode {id} frame {}: {e}", idx.value(i))))?;
     }
     Ok(())
 }

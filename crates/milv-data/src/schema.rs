@@ -49,6 +49,27 @@ impl TableKind {
         Self::ALL.into_iter().find(|t| t.name() == name)
     }
 
+    /// The column naming the group a row belongs to: rows are written, deduplicated and
+    /// deleted a group at a time (an episode; a pair for `alignments`).
+    pub fn group_column(self) -> &'static str {
+        match self {
+            TableKind::Alignments => "pair_id",
+            _ => "episode_id",
+        }
+    }
+
+    /// The column naming what produced a row (a translation model, a scoring run, a
+    /// curation, an alignment run); `None` for the tables ingest writes. Writing the same
+    /// group of the same run twice is a no-op ([`crate::write`]).
+    pub fn run_column(self) -> Option<&'static str> {
+        match self {
+            TableKind::Episodes | TableKind::Frames => None,
+            TableKind::Imagined => Some("model_id"),
+            TableKind::Scores | TableKind::Alignments => Some("run_id"),
+            TableKind::Curated => Some("curation_id"),
+        }
+    }
+
     pub fn columns(self) -> &'static [Column] {
         match self {
             TableKind::Episodes => EPISODES,

@@ -10,14 +10,16 @@
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
-use deltalake::arrow::array::{Array, BinaryArray, Float64Array, Int32Array, ListArray, StringArray};
 use serde::Serialize;
 
-use crate::dataset::{Dataset, read_file};
+use crate::dataset::Dataset;
 use crate::error::{Error, Result};
 use crate::frame_codec::{self, FrameEncoding};
-use crate::read::{AlignmentRun, alignment_run, episode_rows, score_run};
-use crate::rows::Episode;
+use crate::read::{
+    AlignmentRun, alignment_run, curated_weights, episode_rows, newest_alignment_run, newest_score_run,
+    resolve_model, score_run,
+};
+use crate::rows::{Domain, Episode, ImaginedRecord, Row};
 use crate::schema::TableKind;
 
 /// What to show.
@@ -55,62 +57,7 @@ pub struct Image {
     pub data: Vec<u8>,
 }
 
-/// A latent tensor as stored: little-endian values of `dtype` in row-major `shape`.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Latent {
-    pub dtype: String,
-    pub shape: Vec<i32>,
-    pub data: Vec<u8>,
-}
-
-impl Latent {
-    fn item_size(dtype: &str) -> Option<usize> {
-        match dtype {
-            "f16" => Some(2),
-            "f32" => Some(4),
-            _ => None,
-        }
-    }
-
-    /// Checks that the bytes hold exactly `shape` values of `dtype`.
-    pub fn check(&self) -> std::result::Result<(), String> {
-        let size =
-            Latent::item_size(&self.dtype).ok_or_else(|| format!("unknown latent dtype {:?}", self.dtype))?;
-        if self.shape.iter().any(|d| *d <= 0) {
-            return Err(format!(
-                "latent shape {:?} has a non-positive dimension",
-                self.shape
-            ));
-        }
-        let want = self.shape.iter().map(|d| *d as usize).product::<usize>() * size;
-        if self.data.len() != want {
-            return Err(format!(
-                "latent of shape {:?} ({}) has {} bytes, expected {want}",
-                self.shape,
-                self.dtype,
-                self.data.len()
-            ));
-        }
-        Ok(())
-    }
-
-    /// The values as f32.
-    pub fn to_f32(&self) -> std::result::Result<Vec<f32>, String> {
-        self.check()?;
-        Ok(match self.dtype.as_str() {
-            "f16" => self
-                .data
-                .chunks_exact(2)
-                .map(|b| half::f16::from_le_bytes([b[0], b[1]]).to_f32())
-                .collect(),
-            _ => self
-                .data
-                .chunks_exact(4)
-                .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-                .collect(),
-        })
-    }
-}
+pub use crate::rows::Latent;
 
 /// One translated frame.
 #[derive(Clone, Debug, PartialEq)]
@@ -205,117 +152,24 @@ pub struct ViewPlan {
     group: usize,
 }
 
-fn column<'a, T: 'static>(
-    b: &'a deltalake::arrow::array::RecordBatch,
-    name: &str,
-    table: TableKind,
-) -> Result<&'a T> {
-    b.column_by_name(name)
-        .and_then(|c| c.as_any().downcast_ref::<T>())
-        .ok_or_else(|| {
-            Error::Invalid(format!(
-                "{table} table: column {name} missing or of an unexpected type"
-            ))
-        })
-}
-
-/// The value of column `out` in the first row `keep` accepts, searching the table's files
-/// newest first (the newest run, curation, … of something).
-fn newest_value(
-    ds: &Dataset,
-    v: u64,
-    table: TableKind,
-    cols: &[&str],
-    out: &str,
-    keep: &dyn Fn(&deltalake::arrow::array::RecordBatch, usize) -> Result<bool>,
-) -> Result<Option<String>> {
-    let mut files = ds.files(table, v)?;
-    files.sort_by_key(|f| std::cmp::Reverse(f.added_in));
-    for f in files {
-        for b in read_file(&f.abs_path, Some(cols))? {
-            let b = b?;
-            let o: &StringArray = column(&b, out, table)?;
-            for i in 0..b.num_rows() {
-                if keep(&b, i)? {
-                    return Ok(Some(o.value(i).to_string()));
-                }
-            }
-        }
-    }
-    Ok(None)
-}
-
-fn is_model(
-    b: &deltalake::arrow::array::RecordBatch,
-    i: usize,
-    table: TableKind,
-    model: &str,
-) -> Result<bool> {
-    let src: &StringArray = column(b, "source_table", table)?;
-    let m: &StringArray = column(b, "model_id", table)?;
-    Ok(src.value(i) == "imagined" && m.is_valid(i) && m.value(i) == model)
-}
-
-/// Models in the `imagined` table, with the episodes each translated.
-fn models(ds: &Dataset, v: u64) -> Result<BTreeMap<String, BTreeSet<String>>> {
-    let mut out: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
-    for b in ds.scan(TableKind::Imagined, v, Some(&["model_id", "episode_id"]))? {
-        let b = b?;
-        let m: &StringArray = column(&b, "model_id", TableKind::Imagined)?;
-        let e: &StringArray = column(&b, "episode_id", TableKind::Imagined)?;
-        for i in 0..b.num_rows() {
-            if !out.get(m.value(i)).is_some_and(|s| s.contains(e.value(i))) {
-                out.entry(m.value(i).to_string())
-                    .or_default()
-                    .insert(e.value(i).to_string());
-            }
-        }
-    }
-    Ok(out)
-}
-
 impl ViewPlan {
     /// Checks the selection against version `v` and reads the small tables.
     pub fn new(ds: &Dataset, v: u64, opts: &ViewOptions) -> Result<ViewPlan> {
         let all = crate::ops::episodes(ds, v)?;
         let by_id: BTreeMap<&str, &Episode> = all.iter().map(|e| (e.episode_id.as_str(), e)).collect();
-        let models = models(ds, v)?;
         let wants_model = opts.episodes.as_ref().is_none_or(|w| {
             w.iter()
-                .any(|id| by_id.get(id.as_str()).is_some_and(|e| e.domain == "human"))
+                .any(|id| by_id.get(id.as_str()).is_some_and(|e| e.domain == Domain::Human))
         });
-        let model_id = match (&opts.model_id, models.len()) {
-            (Some(m), _) if models.contains_key(m) => Some(m.clone()),
-            (Some(m), _) => {
-                return Err(Error::Invalid(format!(
-                    "model {m} has no rows in the imagined table at version {v} (models there: {})",
-                    if models.is_empty() {
-                        "none".to_string()
-                    } else {
-                        models.keys().cloned().collect::<Vec<_>>().join(", ")
-                    }
-                )));
-            }
-            (None, 1) => models.keys().next().cloned(),
-            (None, 0) if wants_model => {
+        let (model_id, translated) = match resolve_model(ds, v, opts.model_id.as_deref())? {
+            Some((m, eps)) => (Some(m), eps),
+            None if wants_model => {
                 return Err(Error::Invalid(format!(
                     "version {v} has no imagined rows; run `milv-train translate` first"
                 )));
             }
-            (None, 0) => None,
-            (None, _) => {
-                return Err(Error::Invalid(format!(
-                    "version {v} holds {} translation models ({}); choose one with --model-id",
-                    models.len(),
-                    models.keys().cloned().collect::<Vec<_>>().join(", ")
-                )));
-            }
+            None => (None, BTreeSet::new()),
         };
-        let translated = model_id
-            .as_ref()
-            .and_then(|m| models.get(m))
-            .cloned()
-            .unwrap_or_default();
         let episodes: Vec<Episode> = match &opts.episodes {
             None => all
                 .iter()
@@ -328,7 +182,7 @@ impl ViewPlan {
                     let e = by_id
                         .get(id.as_str())
                         .ok_or_else(|| Error::Invalid(format!("no episode {id} at version {v}")))?;
-                    if e.domain == "human" && !translated.contains(id) {
+                    if e.domain == Domain::Human && !translated.contains(id) {
                         return Err(Error::Invalid(format!(
                             "episode {id} has no imagined rows for model {} at version {v}",
                             model_id.as_deref().unwrap_or("?")
@@ -456,10 +310,7 @@ impl ViewPlan {
         let formats: HashMap<String, (FrameEncoding, u32, u32)> = crate::ops::episodes(ds, v)?
             .into_iter()
             .filter(|e| wanted.contains(&e.episode_id))
-            .map(|e| {
-                let enc = FrameEncoding::from_name(&e.frame_encoding).unwrap_or_default();
-                (e.episode_id, (enc, e.width as u32, e.height as u32))
-            })
+            .map(|e| (e.episode_id, (e.frame_encoding, e.width as u32, e.height as u32)))
             .collect();
         let image = |id: &str, i: usize, rows: &crate::read::EpisodeRows| -> Result<Image> {
             let f = formats.get(id).copied().unwrap_or((FrameEncoding::Png, 0, 0));
@@ -557,7 +408,7 @@ pub fn component_name(names: &[String], i: usize) -> String {
 fn action_names(all: &[Episode]) -> Vec<String> {
     if let Some(n) = all
         .iter()
-        .filter(|e| e.domain == "robot")
+        .filter(|e| e.domain == Domain::Robot)
         .find_map(|e| e.action_names.clone())
     {
         return n;
@@ -573,56 +424,21 @@ fn read_quality(
     model: &str,
     want: Option<&str>,
 ) -> Result<(Option<String>, HashMap<FrameKey, Quality>)> {
-    let cols = ["run_id", "source_table", "model_id"];
     let run = match want {
         Some(r) => Some(r.to_string()),
-        None => newest_value(ds, v, TableKind::Scores, &cols, "run_id", &|b, i| {
-            is_model(b, i, TableKind::Scores, model)
-        })?,
+        None => newest_score_run(ds, v, model)?,
     };
     let Some(run) = run else {
         return Ok((None, HashMap::new()));
     };
     let (run, rows) = score_run(ds, v, Some(&run))?;
-    let curation = newest_value(
-        ds,
-        v,
-        TableKind::Curated,
-        &["run_id", "source_table", "model_id", "curation_id"],
-        "curation_id",
-        &|b, i| {
-            let r: &StringArray = column(b, "run_id", TableKind::Curated)?;
-            Ok(r.value(i) == run && is_model(b, i, TableKind::Curated, model)?)
-        },
-    )?;
-    let mut weights: HashMap<FrameKey, f64> = HashMap::new();
-    if let Some(c) = &curation {
-        for b in ds.scan(
-            TableKind::Curated,
-            v,
-            Some(&["episode_id", "frame_index", "weight", "curation_id"]),
-        )? {
-            let b = b?;
-            let t = TableKind::Curated;
-            let (ids, idx): (&StringArray, &Int32Array) =
-                (column(&b, "episode_id", t)?, column(&b, "frame_index", t)?);
-            let (w, cid): (&Float64Array, &StringArray) =
-                (column(&b, "weight", t)?, column(&b, "curation_id", t)?);
-            for i in 0..b.num_rows() {
-                if cid.value(i) == c {
-                    weights.insert((ids.value(i).to_string(), idx.value(i)), w.value(i));
-                }
-            }
-        }
-    }
+    let weights = curated_weights(ds, v, &run, model)?.map(|(_, w)| w);
     let quality = rows
         .into_iter()
         .filter(|r| r.source_table == "imagined" && r.model_id.as_deref() == Some(model))
         .map(|r| {
             let key = (r.episode_id, r.frame_index);
-            let weight = curation
-                .as_ref()
-                .map(|_| weights.get(&key).copied().unwrap_or(0.0));
+            let weight = weights.as_ref().map(|w| w.get(&key).copied().unwrap_or(0.0));
             (
                 key,
                 Quality {
@@ -645,9 +461,7 @@ fn read_aligned(
 ) -> Result<(Option<AlignmentRun>, HashMap<FrameKey, FrameKey>)> {
     let want = match want {
         Some(w) => Some(w.to_string()),
-        None => newest_value(ds, v, TableKind::Alignments, &["run_id"], "run_id", &|_, _| {
-            Ok(true)
-        })?,
+        None => newest_alignment_run(ds, v)?,
     };
     let Some(want) = want else {
         return Ok((None, HashMap::new()));
@@ -670,69 +484,26 @@ fn imagined_rows(
     keep: &BTreeSet<String>,
     model: &str,
 ) -> Result<HashMap<FrameKey, Imagined>> {
-    const T: TableKind = TableKind::Imagined;
-    let cols = [
-        "episode_id",
-        "frame_index",
-        "model_id",
-        "image",
-        "latent",
-        "latent_dtype",
-        "latent_shape",
-        "action",
-    ];
     let mut out = HashMap::new();
-    for b in ds.scan(T, v, Some(&cols))? {
-        let b = b?;
-        let (ids, idx, m): (&StringArray, &Int32Array, &StringArray) = (
-            column(&b, "episode_id", T)?,
-            column(&b, "frame_index", T)?,
-            column(&b, "model_id", T)?,
-        );
-        let img: &BinaryArray = column(&b, "image", T)?;
-        let (lat, dt, shape): (&BinaryArray, &StringArray, &ListArray) = (
-            column(&b, "latent", T)?,
-            column(&b, "latent_dtype", T)?,
-            column(&b, "latent_shape", T)?,
-        );
-        let act: &ListArray = column(&b, "action", T)?;
-        for i in 0..b.num_rows() {
-            if m.value(i) != model || !keep.contains(ids.value(i)) {
+    for b in ds.scan(TableKind::Imagined, v, None)? {
+        for r in ImaginedRecord::from_batch(&b?)? {
+            if r.model_id != model || !keep.contains(&r.episode_id) {
                 continue;
             }
-            let latent = (!lat.is_null(i)).then(|| Latent {
-                dtype: dt.value(i).to_string(),
-                shape: list_values::<Int32Array, i32>(shape, i),
-                data: lat.value(i).to_vec(),
-            });
-            let action =
-                (!act.is_null(i)).then(|| list_values::<deltalake::arrow::array::Float32Array, f32>(act, i));
             out.insert(
-                (ids.value(i).to_string(), idx.value(i)),
+                (r.episode_id, r.frame_index),
                 Imagined {
                     image: Image {
                         format: "png",
-                        data: img.value(i).to_vec(),
+                        data: r.image,
                     },
-                    latent,
-                    action,
+                    latent: r.latent,
+                    action: r.action,
                 },
             );
         }
     }
     Ok(out)
-}
-
-fn list_values<A, T>(l: &ListArray, i: usize) -> Vec<T>
-where
-    A: Array + 'static,
-    for<'a> &'a A: IntoIterator<Item = Option<T>>,
-{
-    let v = l.value(i);
-    v.as_any()
-        .downcast_ref::<A>()
-        .map(|a| a.into_iter().flatten().collect())
-        .unwrap_or_default()
 }
 
 #[cfg(test)]

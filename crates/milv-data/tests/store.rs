@@ -5,7 +5,10 @@
 use std::collections::BTreeSet;
 
 use milv_data::arrow::array::{Array, Int32Array, StringArray};
-use milv_data::{CommitMeta, Dataset, Episode, FrameRows, ShardOptions, TableKind, ops};
+use milv_data::{
+    CommitMeta, Dataset, Domain, Episode, FrameEncoding, FrameRows, Kind, ShardOptions, TableKind, ops,
+};
+use milv_fixtures::Frame;
 
 fn meta(op: &str) -> CommitMeta {
     CommitMeta::for_this_process("store-test", op)
@@ -13,69 +16,33 @@ fn meta(op: &str) -> CommitMeta {
 
 fn episode(id: &str, n: i64) -> Episode {
     Episode {
-        episode_id: id.into(),
-        domain: "robot".into(),
-        kind: "random".into(),
+        kind: Kind::Random,
         task_id: Some("push/block".into()),
         task_family: Some("pushing".into()),
-        pair_id: None,
-        split: "train".into(),
-        n_frames: n,
-        fps: 10.0,
-        width: 2,
-        height: 2,
-        frame_encoding: "raw".into(),
+        frame_encoding: FrameEncoding::Raw,
         action_dim: Some(2),
-        state_dim: None,
         action_names: Some(vec!["dx".into(), "dy".into()]),
-        state_names: None,
-        source_uri: format!("{id}.mp4"),
         source_sha256: "ab".into(),
-        sidecar_uri: None,
-        duration_ns: n * 100_000_000,
-        ingested_at_us: 0,
+        ..milv_fixtures::episode(id, Domain::Robot, n as usize, (2, 2))
     }
 }
 
 /// Commits episodes with `n` raw 2x2 frames each, as one version.
 fn add_episodes(ds: &Dataset, ids: &[&str], n: i64, opts: ShardOptions) -> u64 {
-    let mut txn = ds.begin(meta("ingest")).unwrap();
-    let mut w = txn.shard_writer(TableKind::Frames, opts).unwrap();
-    for id in ids {
-        w.begin_episode().unwrap();
-        let mut rows = FrameRows::new();
-        for i in 0..n {
-            rows.push(
-                id,
-                i as i32,
-                i * 100_000_000,
-                &[i as u8; 12],
-                Some(&[i as f32, -1.0]),
-                None,
-            );
-            if rows.len() == 3 {
-                w.push(rows.finish().unwrap()).unwrap();
-            }
-        }
-        if !rows.is_empty() {
-            w.push(rows.finish().unwrap()).unwrap();
-        }
-        w.end_episode().unwrap();
-    }
-    let frames = w.finish().unwrap();
-    let eps: Vec<Episode> = ids.iter().map(|id| episode(id, n)).collect();
-    let batch = milv_data::episodes_to_batch(&eps).unwrap();
-    let mut ew = txn
-        .shard_writer(TableKind::Episodes, ShardOptions::default())
-        .unwrap();
-    ew.begin_episode().unwrap();
-    ew.push(batch).unwrap();
-    ew.end_episode().unwrap();
-    let ep_files = ew.finish().unwrap();
-    let ids: Vec<String> = ids.iter().map(|s| s.to_string()).collect();
-    txn.add_files(TableKind::Frames, frames, ids.clone());
-    txn.add_files(TableKind::Episodes, ep_files, ids);
-    txn.commit().unwrap()
+    let eps: Vec<(Episode, Vec<Frame>)> = ids
+        .iter()
+        .map(|id| {
+            let frames = (0..n)
+                .map(|i| Frame {
+                    action: Some(vec![i as f32, -1.0]),
+                    ..Frame::image(vec![i as u8; 12])
+                })
+                .collect();
+            (episode(id, n), frames)
+        })
+        .collect();
+    // Three frames per batch: episodes span several batches.
+    milv_fixtures::commit_episodes_with(ds, &eps, meta("ingest"), opts, 3).unwrap()
 }
 
 fn frame_ids(ds: &Dataset, v: u64) -> Vec<(String, i32)> {

@@ -10,10 +10,8 @@ use std::process::Command;
 
 use milv_align::{AlignOptions, align_dataset, features};
 use milv_data::arrow::array::{Array, BinaryArray, Float32Array, Int32Array, ListArray, StringArray};
-use milv_data::frame_codec::{FrameEncoding, encode};
-use milv_data::{
-    CommitMeta, Dataset, Episode, FrameRows, ImaginedRow, ImaginedRows, ShardOptions, TableKind,
-};
+use milv_data::{CommitMeta, Dataset, Domain, Episode, Kind, TableKind};
+use milv_fixtures::{Frame, ImaginedFrame, commit_episodes, commit_imagined};
 use milv_mcap::{Recording, schema};
 use milv_score::{CurateOptions, Rule, RunOptions, Source, curate, score_dataset};
 use milv_sim::env::{Task, paired_clips};
@@ -27,36 +25,20 @@ fn meta() -> CommitMeta {
     CommitMeta::for_this_process("milv-export-test", "fixture")
 }
 
-fn episode(id: &str, domain: &str, pair: &str, n: usize) -> Episode {
+fn episode(id: &str, domain: Domain, pair: &str, n: usize) -> Episode {
     Episode {
-        episode_id: id.into(),
-        domain: domain.into(),
-        kind: "paired".into(),
+        kind: Kind::Paired,
         task_id: Some("draw/x".into()),
-        task_family: Some("drawing".into()),
         pair_id: Some(pair.into()),
-        split: "train".into(),
-        n_frames: n as i64,
-        fps: 10.0,
-        width: SIZE as i32,
-        height: SIZE as i32,
-        frame_encoding: "png".into(),
         action_dim: Some(2),
         state_dim: Some(2),
         action_names: Some(vec!["dx".into(), "dy".into()]),
-        state_names: None,
-        source_uri: format!("{id}.mp4"),
-        source_sha256: "00".into(),
-        sidecar_uri: None,
-        duration_ns: n as i64 * 100_000_000,
-        ingested_at_us: 0,
+        ..milv_fixtures::episode(id, domain, n, (SIZE, SIZE))
     }
 }
 
 fn png(rgb: &[u8]) -> Vec<u8> {
-    let mut out = Vec::new();
-    encode(FrameEncoding::Png, rgb, SIZE, SIZE, &mut out).unwrap();
-    out
+    milv_fixtures::png(rgb, SIZE, SIZE)
 }
 
 /// Two pairs of clips, aligned, translated by a made-up model, scored and curated.
@@ -65,44 +47,24 @@ fn dataset(dir: &Path) -> PathBuf {
     let ds = Dataset::open_or_create(&root, meta()).unwrap();
     let mut rng = rand::rngs::StdRng::seed_from_u64(9);
     let shapes = shapes::training_shapes();
-    let mut txn = ds.begin(meta()).unwrap();
-    let mut w = txn
-        .shard_writer(TableKind::Frames, ShardOptions::default())
-        .unwrap();
     let (mut eps, mut clips) = (Vec::new(), Vec::new());
     for (i, shape) in shapes.iter().take(2).enumerate() {
         let task = Task::Drawing { shape: shape.clone() };
         let pair = paired_clips(&task, SIZE, 12, 9, &mut rng).unwrap();
-        for (domain, r) in [("human", &pair.human), ("robot", &pair.robot)] {
+        for (domain, r) in [(Domain::Human, &pair.human), (Domain::Robot, &pair.robot)] {
             let id = format!("{domain}_{i}");
-            w.begin_episode().unwrap();
-            let mut rows = FrameRows::new();
-            for (k, f) in r.frames.iter().enumerate() {
-                rows.push(
-                    &id,
-                    k as i32,
-                    k as i64 * 100_000_000,
-                    &png(f),
-                    Some(&r.actions[k]),
-                    Some(&r.states[k]),
-                );
-            }
-            w.push(rows.finish().unwrap()).unwrap();
-            w.end_episode().unwrap();
-            eps.push(episode(&id, domain, &format!("pair-{i}"), r.frames.len()));
+            let frames = (0..r.frames.len())
+                .map(|k| Frame {
+                    image: png(&r.frames[k]),
+                    action: Some(r.actions[k].to_vec()),
+                    state: Some(r.states[k].to_vec()),
+                })
+                .collect();
+            eps.push((episode(&id, domain, &format!("pair-{i}"), r.frames.len()), frames));
         }
         clips.push(pair);
     }
-    let ids: Vec<String> = eps.iter().map(|e| e.episode_id.clone()).collect();
-    txn.add_files(TableKind::Frames, w.finish().unwrap(), ids.clone());
-    let mut ew = txn
-        .shard_writer(TableKind::Episodes, ShardOptions::default())
-        .unwrap();
-    ew.begin_episode().unwrap();
-    ew.push(milv_data::episodes_to_batch(&eps).unwrap()).unwrap();
-    ew.end_episode().unwrap();
-    txn.add_files(TableKind::Episodes, ew.finish().unwrap(), ids);
-    txn.commit().unwrap();
+    commit_episodes(&ds, &eps, meta()).unwrap();
     align_dataset(
         &ds,
         None,
@@ -116,37 +78,31 @@ fn dataset(dir: &Path) -> PathBuf {
     // The "translation": the robot clip's frame, a latent and an action that differ per frame.
     let mut m = meta();
     m.summary = serde_json::json!({"model_id": MODEL, "model_config": {"image_size": SIZE}});
-    let mut txn = ds.begin(m).unwrap();
-    let mut w = txn
-        .shard_writer(TableKind::Imagined, ShardOptions::default())
-        .unwrap();
-    let mut ids = Vec::new();
-    for (i, pair) in clips.iter().enumerate() {
-        let id = format!("human_{i}");
-        w.begin_episode().unwrap();
-        let mut rows = ImaginedRows::new();
-        for k in 0..pair.human.frames.len() {
-            let img = png(&pair.robot.frames[pair.human_to_robot[k]]);
-            let latent: Vec<u8> = (0..4 * 4 * 4)
-                .flat_map(|j| half_bits((j as f32 * 0.37 + k as f32 * 1.1 + i as f32).sin()))
+    let translated: Vec<(String, Vec<ImaginedFrame>)> = clips
+        .iter()
+        .enumerate()
+        .map(|(i, pair)| {
+            let frames = (0..pair.human.frames.len())
+                .map(|k| ImaginedFrame {
+                    image: png(&pair.robot.frames[pair.human_to_robot[k]]),
+                    latent: Some((
+                        (0..4 * 4 * 4)
+                            .flat_map(|j| half_bits((j as f32 * 0.37 + k as f32 * 1.1 + i as f32).sin()))
+                            .collect(),
+                        "f16".into(),
+                        vec![4, 4, 4],
+                    )),
+                    action: Some(vec![0.1 * k as f32 + 0.3, -0.7 * k as f32 / 3.0]),
+                })
                 .collect();
-            let action = [0.1 * k as f32 + 0.3, -0.7 * k as f32 / 3.0];
-            rows.push(&ImaginedRow {
-                episode_id: &id,
-                frame_index: k as i32,
-                timestamp_ns: k as i64 * 100_000_000,
-                model_id: MODEL,
-                image: &img,
-                latent: Some((&latent, "f16", &[4, 4, 4])),
-                action: Some(&action),
-            });
-        }
-        w.push(rows.finish().unwrap()).unwrap();
-        w.end_episode().unwrap();
-        ids.push(id);
-    }
-    txn.add_files(TableKind::Imagined, w.finish().unwrap(), ids);
-    txn.commit().unwrap();
+            (format!("human_{i}"), frames)
+        })
+        .collect();
+    let refs: Vec<(&str, Vec<ImaginedFrame>)> = translated
+        .iter()
+        .map(|(id, f)| (id.as_str(), f.clone()))
+        .collect();
+    commit_imagined(&ds, MODEL, &refs, m).unwrap();
     let opts = RunOptions {
         source: Source::Imagined,
         model_id: None,
@@ -406,18 +362,8 @@ fn a_human_episode_without_imagined_rows_is_an_error() {
     // A third human episode the model never translated.
     let ds = Dataset::open(&root).unwrap();
     let mut txn = ds.begin(meta()).unwrap();
-    let mut ew = txn
-        .shard_writer(TableKind::Episodes, ShardOptions::default())
+    txn.add_episode_rows(&[episode("human_new", Domain::Human, "pair-9", 3)])
         .unwrap();
-    ew.begin_episode().unwrap();
-    ew.push(milv_data::episodes_to_batch(&[episode("human_new", "human", "pair-9", 3)]).unwrap())
-        .unwrap();
-    ew.end_episode().unwrap();
-    txn.add_files(
-        TableKind::Episodes,
-        ew.finish().unwrap(),
-        vec!["human_new".into()],
-    );
     txn.commit().unwrap();
     let out = dir.path().join("x.mcap");
     let p = export(&[
@@ -437,29 +383,14 @@ fn a_latent_that_does_not_match_its_shape_is_an_error() {
     let dir = tempfile::tempdir().unwrap();
     let root = dataset(dir.path());
     let ds = Dataset::open(&root).unwrap();
-    let mut txn = ds.begin(meta()).unwrap();
-    let mut w = txn
-        .shard_writer(TableKind::Imagined, ShardOptions::default())
-        .unwrap();
-    w.begin_episode().unwrap();
-    let mut rows = ImaginedRows::new();
     let img = png(&vec![0; (SIZE * SIZE * 3) as usize]);
-    for k in 0..2 {
-        rows.push(&ImaginedRow {
-            episode_id: "human_0",
-            frame_index: k,
-            timestamp_ns: i64::from(k) * 100_000_000,
-            model_id: "acg-bad",
-            image: &img,
-            // 63 values where the shape says 64.
-            latent: Some((&[0u8; 126], "f16", &[4, 4, 4])),
-            action: Some(&[0.0, 0.0]),
-        });
-    }
-    w.push(rows.finish().unwrap()).unwrap();
-    w.end_episode().unwrap();
-    txn.add_files(TableKind::Imagined, w.finish().unwrap(), vec!["human_0".into()]);
-    txn.commit().unwrap();
+    let bad = ImaginedFrame {
+        image: img,
+        // 63 values where the shape says 64.
+        latent: Some((vec![0u8; 126], "f16".into(), vec![4, 4, 4])),
+        action: Some(vec![0.0, 0.0]),
+    };
+    commit_imagined(&ds, "acg-bad", &[("human_0", vec![bad.clone(), bad])], meta()).unwrap();
     for cmd in ["mcap", "rerun"] {
         let out = dir.path().join(format!("x.{cmd}"));
         let p = export(&[

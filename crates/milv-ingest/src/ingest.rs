@@ -8,7 +8,8 @@ use std::path::{Path, PathBuf};
 
 use milv_data::frame_codec::{self, FrameEncoding};
 use milv_data::{
-    CommitMeta, Dataset, Episode, FileAdd, FrameRows, InputDigest, ShardOptions, ShardWriter, TableKind,
+    CommitMeta, Dataset, Domain, Episode, FileAdd, FrameRows, InputDigest, Kind, ShardOptions, ShardWriter,
+    Split, TableKind,
 };
 use milv_video::{DecodeOptions, Frame, Resize};
 use rayon::prelude::*;
@@ -20,9 +21,6 @@ use crate::journal::Journal;
 use crate::manifest::InputSpec;
 use crate::sidecar::{self, EpisodeMeta, Sidecar};
 
-pub const DOMAINS: &[&str] = &["human", "robot"];
-pub const KINDS: &[&str] = &["demo", "random", "paired"];
-pub const SPLITS: &[&str] = &["train", "val", "test"];
 /// Frame rates accepted for folders and resampling.
 pub const MIN_FPS: f64 = 0.001;
 pub const MAX_FPS: f64 = 10_000.0;
@@ -119,12 +117,12 @@ impl IngestReport {
 /// Metadata of an episode after layering and validation.
 #[derive(Clone, Debug, Serialize)]
 struct Resolved {
-    domain: String,
-    kind: String,
+    domain: Domain,
+    kind: Kind,
     task_id: Option<String>,
     task_family: Option<String>,
     pair_id: Option<String>,
-    split: String,
+    split: Split,
     /// Frame rate of a frame folder.
     folder_fps: Option<f64>,
 }
@@ -185,15 +183,9 @@ pub fn source_digest(path: &Path) -> Result<String> {
     Ok(hex(&h.finalize()))
 }
 
-fn check_choice(path: &Path, what: &str, v: &str, allowed: &[&str]) -> Result<()> {
-    if allowed.contains(&v) {
-        Ok(())
-    } else {
-        Err(Error::input(
-            path,
-            format!("unknown {what} {v:?} (expected one of {})", allowed.join(", ")),
-        ))
-    }
+/// A metadata value of a closed set (domain, kind, split), or an error naming the input.
+fn parse_choice<T: std::str::FromStr<Err = String>>(path: &Path, v: &str) -> Result<T> {
+    v.parse().map_err(|msg: String| Error::input(path, msg))
 }
 
 fn resolve_meta(spec: &InputSpec, sidecar: Option<&Sidecar>, defaults: &EpisodeMeta) -> Result<Resolved> {
@@ -203,11 +195,12 @@ fn resolve_meta(spec: &InputSpec, sidecar: Option<&Sidecar>, defaults: &EpisodeM
     let domain = m
         .domain
         .ok_or_else(|| Error::input(p, "no domain (give --domain, a sidecar or a manifest column)"))?;
-    check_choice(p, "domain", &domain, DOMAINS)?;
-    let kind = m.kind.unwrap_or_else(|| "demo".into());
-    check_choice(p, "kind", &kind, KINDS)?;
-    let split = m.split.unwrap_or_else(|| "train".into());
-    check_choice(p, "split", &split, SPLITS)?;
+    let domain: Domain = parse_choice(p, &domain)?;
+    let kind: Kind = m.kind.as_deref().map_or(Ok(Kind::Demo), |k| parse_choice(p, k))?;
+    let split: Split = m
+        .split
+        .as_deref()
+        .map_or(Ok(Split::Train), |k| parse_choice(p, k))?;
     if let Some(f) = m.fps
         && !(MIN_FPS..=MAX_FPS).contains(&f)
     {
@@ -511,17 +504,17 @@ fn ingest_one(
     let period = if fps > 0.0 { (1e9 / fps).round() as i64 } else { 0 };
     Ok(Episode {
         episode_id: p.episode_id.clone(),
-        domain: p.meta.domain.clone(),
-        kind: p.meta.kind.clone(),
+        domain: p.meta.domain,
+        kind: p.meta.kind,
         task_id: p.meta.task_id.clone(),
         task_family: p.meta.task_family.clone(),
         pair_id: p.meta.pair_id.clone(),
-        split: p.meta.split.clone(),
+        split: p.meta.split,
         n_frames: st.n,
         fps,
         width: width as i32,
         height: height as i32,
-        frame_encoding: opts.encoding.name().into(),
+        frame_encoding: opts.encoding,
         action_dim: side
             .and_then(|s| s.actions.as_ref())
             .and_then(|a| a.first())
@@ -779,7 +772,6 @@ fn ingest_attempt(
     let adopted_ids: Vec<String> = adopted.episodes.iter().map(|e| e.episode_id.clone()).collect();
     txn.adopt_files(TableKind::Frames, adopted.files, adopted_ids);
     episodes.extend(adopted.episodes);
-    let ids: Vec<String> = episodes.iter().map(|e| e.episode_id.clone()).collect();
     if let Some(e) = fatal {
         txn.abort();
         return Err(e);
@@ -789,14 +781,10 @@ fn ingest_attempt(
         journal.remove();
         return Ok(report);
     }
-    let ep_files = match write_episodes(&txn, &episodes) {
-        Ok(f) => f,
-        Err(e) => {
-            txn.abort();
-            return Err(e);
-        }
-    };
-    txn.add_files(TableKind::Episodes, ep_files, ids);
+    if let Err(e) = txn.add_episode_rows(&episodes) {
+        txn.abort();
+        return Err(e.into());
+    }
     let m = txn.meta_mut();
     m.inputs = digests;
     m.summary = serde_json::json!({
@@ -836,17 +824,6 @@ fn input_digests(p: &Planned) -> Vec<InputDigest> {
         });
     }
     out
-}
-
-fn write_episodes(txn: &milv_data::Transaction<'_>, episodes: &[Episode]) -> Result<Vec<FileAdd>> {
-    let batch = milv_data::episodes_to_batch(episodes)?;
-    let mut w = txn.shard_writer(TableKind::Episodes, ShardOptions::default())?;
-    for i in 0..episodes.len() {
-        w.begin_episode()?;
-        w.push(batch.slice(i, 1))?;
-        w.end_episode()?;
-    }
-    Ok(w.finish()?)
 }
 
 #[cfg(test)]

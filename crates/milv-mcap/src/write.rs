@@ -254,7 +254,7 @@ impl<W: Write + Seek> Recorder<W> {
     fn episode(&mut self, ev: &EpisodeView, offset_ns: u64, path: &Path) -> Result<()> {
         let e = &ev.episode;
         let id = e.episode_id.as_str();
-        let own = if e.domain == "robot" {
+        let own = if e.domain == milv_data::Domain::Robot {
             schema::ROBOT_IMAGE
         } else {
             schema::HUMAN_IMAGE
@@ -263,7 +263,7 @@ impl<W: Write + Seek> Recorder<W> {
         for f in &ev.frames {
             let t = offset_ns + f.timestamp_ns.max(0) as u64;
             self.image(own, t, &f.image, path)?;
-            if e.domain == "robot"
+            if e.domain == milv_data::Domain::Robot
                 && let Some(a) = &f.action
             {
                 self.action(schema::ROBOT_ACTION, t, id, f.frame_index, a, path)?;
@@ -305,8 +305,8 @@ impl<W: Write + Seek> Recorder<W> {
         let end = offset_ns + ev.duration_ns();
         let meta = BTreeMap::from([
             ("episode_id".to_string(), id.to_string()),
-            ("domain".to_string(), e.domain.clone()),
-            ("kind".to_string(), e.kind.clone()),
+            ("domain".to_string(), e.domain.to_string()),
+            ("kind".to_string(), e.kind.to_string()),
             ("task_id".to_string(), e.task_id.clone().unwrap_or_default()),
             ("frames".to_string(), ev.frames.len().to_string()),
             ("start_ns".to_string(), start.to_string()),

@@ -165,7 +165,7 @@ impl Logger {
 
     fn episode(&mut self, ev: &EpisodeView) -> Result<usize> {
         let e = &ev.episode;
-        let own = if e.domain == "robot" {
+        let own = if e.domain == milv_data::Domain::Robot {
             "robot/image"
         } else {
             "human/image"
@@ -189,7 +189,7 @@ impl Logger {
                 self.rec.log("episode", &rerun::TextDocument::new(card.clone()))?;
             }
             self.rec.log(own, &encoded(&f.image))?;
-            if e.domain == "robot"
+            if e.domain == milv_data::Domain::Robot
                 && let Some(a) = &f.action
             {
                 self.actions("true", a)?;

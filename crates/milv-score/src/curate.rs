@@ -8,13 +8,10 @@
 //! versions.
 
 use std::collections::BTreeMap;
-use std::sync::Arc;
 
-use milv_data::arrow::array::{ArrayRef, Float64Array, Int32Array, RecordBatch, StringArray};
-use milv_data::{CommitMeta, Dataset, ShardOptions, TableKind};
+use milv_data::{CommitMeta, CuratedRow, Dataset, ScoreRow, ShardOptions, TableKind, score_run};
 use serde::Serialize;
 
-use crate::run::{ScoreRow, read_run};
 use crate::{Error, Result, digest};
 
 /// Which frames to keep.
@@ -38,6 +35,7 @@ pub struct CurateOptions {
 
 #[derive(Clone, Debug, Serialize)]
 pub struct CurateReport {
+    /// The version committed, or the read one when the view already was this curation.
     pub version: u64,
     pub read_version: u64,
     pub run_id: String,
@@ -51,9 +49,11 @@ pub struct CurateReport {
     pub episodes_scored: usize,
     pub episodes_kept: usize,
     pub mean_weight_kept: f64,
+    /// The curated view already was this curation: nothing was committed.
+    pub unchanged: bool,
 }
 
-pub use milv_quality::set_weight as weight;
+use milv_quality::set_weight as weight;
 
 /// Curates the latest version's scores and commits the `curated` view.
 pub fn curate(ds: &Dataset, opts: &CurateOptions, mut meta: CommitMeta) -> Result<CurateReport> {
@@ -75,7 +75,7 @@ pub fn curate(ds: &Dataset, opts: &CurateOptions, mut meta: CommitMeta) -> Resul
     let txn = ds.begin(CommitMeta::default())?;
     let v = txn.base_version();
     drop(txn);
-    let (run_id, rows) = read_run(ds, v, opts.run_id.as_deref())?;
+    let (run_id, rows) = score_run(ds, v, opts.run_id.as_deref())?;
     let bmin = rows.iter().map(|r| r.brenner).fold(f64::INFINITY, f64::min);
     let bmax = rows.iter().map(|r| r.brenner).fold(f64::NEG_INFINITY, f64::max);
     let w: Vec<f64> = rows
@@ -133,7 +133,13 @@ pub fn curate(ds: &Dataset, opts: &CurateOptions, mut meta: CommitMeta) -> Resul
         episodes_scored,
         episodes_kept: kept.len(),
         mean_weight_kept,
+        unchanged: false,
     };
+    // Curating the same run with the same rule again is a no-op.
+    if milv_data::read::curations(ds, v)? == [curation_id.clone()].into() {
+        report.unchanged = true;
+        return Ok(report);
+    }
     meta.summary = serde_json::to_value(&report).unwrap_or_default();
     let mut txn = ds.begin(meta)?;
     let old: Vec<String> = ds
@@ -144,56 +150,38 @@ pub fn curate(ds: &Dataset, opts: &CurateOptions, mut meta: CommitMeta) -> Resul
     txn.remove_files(TableKind::Curated, old, Vec::new());
     let params = serde_json::json!({"curation_id": curation_id, "run_id": run_id, "threshold": threshold,
         "brenner_min": bmin, "brenner_max": bmax, "rule": opts.rule, "min_episode_fraction": opts.min_episode_fraction});
-    let mut w = txn.shard_writer(
-        TableKind::Curated,
-        ShardOptions {
-            file_metadata: vec![("milv.curation".into(), params.to_string())],
-            ..ShardOptions::default()
-        },
-    )?;
-    let mut ids = Vec::new();
-    let written = (|| -> Result<()> {
+    let shard = ShardOptions {
+        file_metadata: vec![("milv.curation".into(), params.to_string())],
+        ..ShardOptions::default()
+    };
+    let written = txn.write_groups(TableKind::Curated, None, shard, |w| -> Result<()> {
         for (id, frames) in &kept {
-            w.begin_episode()?;
-            w.push(curated_batch(id, frames, &run_id, &curation_id)?)?;
-            w.end_episode()?;
-            ids.push(id.to_string());
+            w.group(id, &curated_rows(id, frames, &run_id, &curation_id))?;
         }
         Ok(())
-    })();
+    });
     if let Err(e) = written {
-        w.abort();
         txn.abort();
         return Err(e);
     }
-    txn.add_files(TableKind::Curated, w.finish()?, ids);
     report.version = txn.commit()?;
     Ok(report)
 }
 
-fn curated_batch(
-    id: &str,
-    frames: &[(&ScoreRow, f64)],
-    run_id: &str,
-    curation_id: &str,
-) -> Result<RecordBatch> {
-    let n = frames.len();
-    let first = frames
-        .first()
-        .ok_or_else(|| Error::Invalid(format!("episode {id} has no kept frames")))?
-        .0;
-    let cols: Vec<ArrayRef> = vec![
-        Arc::new(StringArray::from(vec![id; n])),
-        Arc::new(Int32Array::from_iter_values(
-            frames.iter().map(|(r, _)| r.frame_index),
-        )),
-        Arc::new(Float64Array::from_iter_values(frames.iter().map(|(_, w)| *w))),
-        Arc::new(StringArray::from(vec![first.source_table.as_str(); n])),
-        Arc::new(StringArray::from(vec![first.model_id.as_deref(); n])),
-        Arc::new(StringArray::from(vec![run_id; n])),
-        Arc::new(StringArray::from(vec![curation_id; n])),
-    ];
-    Ok(RecordBatch::try_new(TableKind::Curated.arrow_schema(), cols)?)
+/// The `curated` rows of one episode's kept frames.
+fn curated_rows(id: &str, frames: &[(&ScoreRow, f64)], run_id: &str, curation_id: &str) -> Vec<CuratedRow> {
+    frames
+        .iter()
+        .map(|(r, w)| CuratedRow {
+            episode_id: id.to_string(),
+            frame_index: r.frame_index,
+            weight: *w,
+            source_table: r.source_table.clone(),
+            model_id: r.model_id.clone(),
+            run_id: run_id.to_string(),
+            curation_id: curation_id.to_string(),
+        })
+        .collect()
 }
 
 #[cfg(test)]

@@ -27,8 +27,6 @@ pub use run::{RunOptions, RunReport, Source, score_dataset};
 pub enum Error {
     #[error(transparent)]
     Data(#[from] milv_data::Error),
-    #[error("arrow: {0}")]
-    Arrow(#[from] milv_data::arrow::error::ArrowError),
     #[error("{0}")]
     Invalid(String),
     #[error("the selection is empty: {0}")]
@@ -49,13 +47,3 @@ pub struct EpisodeError {
 }
 
 pub(crate) use milv_data::run_id as digest;
-
-/// Typed column access with an error naming the column.
-pub(crate) fn column<'a, T: 'static>(
-    b: &'a milv_data::arrow::array::RecordBatch,
-    name: &str,
-) -> Result<&'a T> {
-    b.column_by_name(name)
-        .and_then(|c| c.as_any().downcast_ref::<T>())
-        .ok_or_else(|| Error::Invalid(format!("column {name} missing or of an unexpected type")))
-}

@@ -2,11 +2,10 @@
 
 use std::collections::BTreeMap;
 
-use milv_data::Dataset;
+use milv_data::{Dataset, ScoreRow, score_run};
 use serde::Serialize;
 
 use crate::Result;
-use crate::run::{ScoreRow, read_run};
 
 #[derive(Clone, Debug, Serialize)]
 pub struct EpisodeSummary {
@@ -52,7 +51,7 @@ pub struct Summary {
 /// Summarises scoring run `run_id` (default: the newest) at `version` (default: latest).
 pub fn summarize(ds: &Dataset, version: Option<u64>, run_id: Option<&str>, worst: usize) -> Result<Summary> {
     let v = ds.resolve(version)?;
-    let (run_id, rows) = read_run(ds, v, run_id)?;
+    let (run_id, rows) = score_run(ds, v, run_id)?;
     let mut by_ep: BTreeMap<String, Vec<&ScoreRow>> = BTreeMap::new();
     for r in &rows {
         by_ep.entry(r.episode_id.clone()).or_default().push(r);

@@ -11,13 +11,13 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 use std::sync::Mutex;
 
-use milv_data::arrow::array::{ArrayRef, BinaryArray, Float64Array, Int32Array, RecordBatch, StringArray};
 use milv_data::frame_codec::{self, FrameEncoding};
-use milv_data::{CommitMeta, Dataset, Episode, Partition, ShardOptions, TableKind, ops};
-use milv_quality::{ClipScorer, FrameScore, Rgb};
+use milv_data::read::stream_images;
+use milv_data::{CommitMeta, Dataset, Domain, Episode, Partition, ScoreRow, ShardOptions, TableKind, ops};
+use milv_quality::{ClipScorer, FrameScore, Rgb, set_weight};
 use serde::Serialize;
 
-use crate::{EpisodeError, Error, Result, column, digest};
+use crate::{EpisodeError, Error, Result, digest};
 
 /// Which frames to score.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -45,8 +45,8 @@ pub struct RunOptions {
     pub model_id: Option<String>,
     /// Only these episodes.
     pub episodes: Option<BTreeSet<String>>,
-    /// Only episodes of this domain (human | robot).
-    pub domain: Option<String>,
+    /// Only episodes of this domain.
+    pub domain: Option<Domain>,
     pub jobs: usize,
     pub partition: Option<Partition>,
     /// Commit the episodes that scored and report the others (otherwise commit nothing).
@@ -140,57 +140,6 @@ fn score_episode(
     Ok(out)
 }
 
-/// The model to score (the given one, checked, or the only one in the table) and the
-/// episodes it translated.
-fn resolve_model(ds: &Dataset, version: u64, wanted: Option<&str>) -> Result<(String, BTreeSet<String>)> {
-    let mut models: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
-    for b in ds.scan(TableKind::Imagined, version, Some(&["episode_id", "model_id"]))? {
-        let b = b?;
-        let (ids, m): (&StringArray, &StringArray) = (column(&b, "episode_id")?, column(&b, "model_id")?);
-        for i in 0..b.num_rows() {
-            models
-                .entry(m.value(i).to_string())
-                .or_default()
-                .insert(ids.value(i).to_string());
-        }
-    }
-    let names = || models.keys().cloned().collect::<Vec<_>>().join(", ");
-    let model = match wanted {
-        Some(w) if models.contains_key(w) => w.to_string(),
-        Some(w) => {
-            return Err(Error::Invalid(format!(
-                "model {w} has no rows in the imagined table at version {version} (models: {})",
-                names()
-            )));
-        }
-        None if models.len() == 1 => models.keys().next().cloned().unwrap_or_default(),
-        None => {
-            return Err(Error::Invalid(format!(
-                "the imagined table at version {version} holds {} models; choose one with --model-id: {}",
-                models.len(),
-                names()
-            )));
-        }
-    };
-    let eps = models.remove(&model).unwrap_or_default();
-    Ok((model, eps))
-}
-
-/// Episodes of this run that earlier versions already scored.
-fn already_scored(ds: &Dataset, version: u64, run_id: &str) -> Result<BTreeSet<String>> {
-    let mut done = BTreeSet::new();
-    for b in ds.scan(TableKind::Scores, version, Some(&["episode_id", "run_id"]))? {
-        let b = b?;
-        let (ids, runs): (&StringArray, &StringArray) = (column(&b, "episode_id")?, column(&b, "run_id")?);
-        for i in 0..b.num_rows() {
-            if runs.value(i) == run_id {
-                done.insert(ids.value(i).to_string());
-            }
-        }
-    }
-    Ok(done)
-}
-
 /// Scores the selected episodes of `version` (default: latest) and commits a `scores`
 /// version. `progress` is called with the number of frames scored since the last call.
 pub fn score_dataset(
@@ -227,7 +176,9 @@ pub fn score_dataset(
     }
     let (model_id, translated) = match opts.source {
         Source::Imagined => {
-            let (m, eps) = resolve_model(ds, v, opts.model_id.as_deref())?;
+            let (m, eps) = milv_data::resolve_model(ds, v, opts.model_id.as_deref())?.ok_or_else(|| {
+                Error::EmptySelection(format!("{}@{v} has no imagined rows", ds.root().display()))
+            })?;
             (Some(m), Some(eps))
         }
         Source::Frames => (None, None),
@@ -235,7 +186,7 @@ pub fn score_dataset(
     let selected: BTreeSet<String> = episodes
         .values()
         .filter(|e| opts.episodes.as_ref().is_none_or(|s| s.contains(&e.episode_id)))
-        .filter(|e| opts.domain.as_ref().is_none_or(|d| *d == e.domain))
+        .filter(|e| opts.domain.is_none_or(|d| d == e.domain))
         .filter(|e| translated.as_ref().is_none_or(|t| t.contains(&e.episode_id)))
         .map(|e| e.episode_id.clone())
         .collect();
@@ -264,7 +215,7 @@ pub fn score_dataset(
     parts.push("|");
     parts.extend(selected.iter().map(String::as_str));
     let run_id = digest(&parts);
-    let done = already_scored(ds, ds.latest_version()?, &run_id)?;
+    let done = milv_data::run_groups(ds, ds.latest_version()?, TableKind::Scores, &run_id)?;
     let todo: BTreeSet<String> = selected
         .iter()
         .filter(|id| opts.partition.is_none_or(|p| p.contains_key(id)))
@@ -332,32 +283,20 @@ pub fn score_dataset(
         "failed": report.failed.len(),
     });
     let mut txn = ds.begin(meta)?;
-    let mut w = txn.shard_writer(TableKind::Scores, shard)?;
     let norm = report.weights_written.then_some((bmin, bmax));
-    let mut ids = Vec::new();
-    let written = (|| -> Result<()> {
+    let written = txn.write_groups(TableKind::Scores, Some(&run_id), shard, |w| -> Result<()> {
         for (id, scores) in &scored {
-            w.begin_episode()?;
-            w.push(scores_batch(
+            w.group(
                 id,
-                scores,
-                table.name(),
-                model_id.as_deref(),
-                &run_id,
-                norm,
-            )?)?;
-            w.end_episode()?;
-            ids.push(id.clone());
+                &score_rows(id, scores, table, model_id.as_deref(), &run_id, norm),
+            )?;
         }
         Ok(())
-    })();
+    });
     if let Err(e) = written {
-        w.abort();
         txn.abort();
         return Err(e);
     }
-    let files = w.finish()?;
-    txn.add_files(TableKind::Scores, files, ids);
     report.version = txn.commit()?;
     Ok(report)
 }
@@ -373,24 +312,14 @@ fn score_episodes(
     progress: &(dyn Fn(u64) + Sync),
 ) -> Result<(Vec<Scored>, Vec<EpisodeError>)> {
     let table = opts.source.table();
-    let mut cols = vec!["episode_id", "frame_index", "image"];
-    if model_id.is_some() {
-        cols.push("model_id");
-    }
     let mut decoders = BTreeMap::new();
     for id in todo {
         let d = match opts.source {
             Source::Imagined => Decode::AnyPng,
             Source::Frames => {
                 let e = &episodes[id];
-                let enc = FrameEncoding::from_name(&e.frame_encoding).ok_or_else(|| {
-                    Error::Invalid(format!(
-                        "episode {id}: unknown frame encoding {:?}",
-                        e.frame_encoding
-                    ))
-                })?;
                 Decode::Stored {
-                    enc,
+                    enc: e.frame_encoding,
                     w: e.width as u32,
                     h: e.height as u32,
                 }
@@ -442,36 +371,24 @@ fn score_episodes(
             tx.send(job)
                 .map_err(|_| Error::Invalid("scoring workers stopped".into()))
         };
-        for batch in ds.scan(table, v, Some(&cols))? {
-            let b = batch?;
-            let ids: &StringArray = column(&b, "episode_id")?;
-            let idx: &Int32Array = column(&b, "frame_index")?;
-            let img: &BinaryArray = column(&b, "image")?;
-            let models: Option<&StringArray> = match model_id {
-                Some(_) => Some(column(&b, "model_id")?),
-                None => None,
-            };
-            for i in 0..b.num_rows() {
-                let id = ids.value(i);
-                if !todo.contains(id) || models.is_some_and(|m| Some(m.value(i)) != model_id) {
+        for row in stream_images(ds, v, table, model_id, &|id| todo.contains(id))? {
+            let row = row?;
+            let id = row.episode_id.as_str();
+            if cur.as_ref().is_none_or(|c| c.episode_id != id) {
+                if let Some(done) = cur.take() {
+                    send(done)?;
+                }
+                if !seen.insert(id.to_string()) {
+                    fail(id, "its rows are split across files or interleaved with other episodes; run `milv-ds compact`".into());
                     continue;
                 }
-                if cur.as_ref().is_none_or(|c| c.episode_id != id) {
-                    if let Some(done) = cur.take() {
-                        send(done)?;
-                    }
-                    if !seen.insert(id.to_string()) {
-                        fail(id, "its rows are split across files or interleaved with other episodes; run `milv-ds compact`".into());
-                        continue;
-                    }
-                    cur = Some(Job {
-                        episode_id: id.to_string(),
-                        frames: Vec::new(),
-                    });
-                }
-                if let Some(c) = cur.as_mut() {
-                    c.frames.push((idx.value(i), img.value(i).to_vec()));
-                }
+                cur = Some(Job {
+                    episode_id: id.to_string(),
+                    frames: Vec::new(),
+                });
+            }
+            if let Some(c) = cur.as_mut() {
+                c.frames.push((row.frame_index, row.image));
             }
         }
         if let Some(done) = cur.take() {
@@ -499,35 +416,29 @@ fn score_episodes(
     Ok((scored, failed))
 }
 
-fn scores_batch(
+/// The `scores` rows of one scored episode; weights set-normalised over the run when the
+/// run is not partitioned (`norm`: its Brenner minimum and maximum).
+fn score_rows(
     id: &str,
     s: &[FrameScore],
-    table: &str,
+    table: TableKind,
     model_id: Option<&str>,
     run_id: &str,
     norm: Option<(f64, f64)>,
-) -> Result<RecordBatch> {
-    let n = s.len();
-    let f64s = |f: &dyn Fn(&FrameScore) -> f64| -> ArrayRef {
-        Arc::new(Float64Array::from_iter_values(s.iter().map(f)))
-    };
-    let weight: Float64Array = s
-        .iter()
-        .map(|f| norm.map(|(lo, hi)| crate::curate::weight(f.brenner.normalized, f.ssim, lo, hi)))
-        .collect();
-    let cols: Vec<ArrayRef> = vec![
-        Arc::new(StringArray::from(vec![id; n])),
-        Arc::new(Int32Array::from_iter_values(0..n as i32)),
-        Arc::new(StringArray::from(vec![table; n])),
-        Arc::new(StringArray::from(vec![model_id; n])),
-        Arc::new(StringArray::from(vec![run_id; n])),
-        f64s(&|f| f.brenner.raw),
-        f64s(&|f| f.brenner.normalized),
-        f64s(&|f| f.ssim),
-        f64s(&|f| f.beta),
-        Arc::new(weight),
-    ];
-    Ok(RecordBatch::try_new(TableKind::Scores.arrow_schema(), cols)?)
+) -> Vec<ScoreRow> {
+    s.iter()
+        .enumerate()
+        .map(|(k, f)| ScoreRow {
+            episode_id: id.to_string(),
+            frame_index: k as i32,
+            source_table: table.name().to_string(),
+            model_id: model_id.map(str::to_string),
+            run_id: run_id.to_string(),
+            brenner_raw: f.brenner.raw,
+            brenner: f.brenner.normalized,
+            ssim: f.ssim,
+            beta: f.beta,
+            weight: norm.map(|(lo, hi)| set_weight(f.brenner.normalized, f.ssim, lo, hi)),
+        })
+        .collect()
 }
-
-pub use milv_data::read::{ScoreRow, score_run as read_run};

@@ -3,13 +3,10 @@
 #![allow(clippy::unwrap_used)]
 
 use std::collections::BTreeSet;
-use std::sync::Arc;
 
-use milv_data::arrow::array::{
-    Array, ArrayRef, BinaryArray, Float64Array, Int32Array, Int64Array, RecordBatch, StringArray,
-};
 use milv_data::frame_codec::{self, FrameEncoding};
-use milv_data::{CommitMeta, Dataset, Episode, FrameRows, Partition, ShardOptions, TableKind};
+use milv_data::{CommitMeta, CuratedRow, Dataset, Domain, Episode, Partition, ScoreRow, TableKind};
+use milv_fixtures::{Frame, ImaginedFrame};
 use milv_quality::{Rgb, beta_video};
 use milv_score::{CurateOptions, Error, Rule, RunOptions, Source, curate, score_dataset, summarize};
 
@@ -33,42 +30,24 @@ fn frame(seed: u32, t: u32, w: usize, h: usize) -> Vec<u8> {
     v
 }
 
-fn episode(id: &str, domain: &str, n: i64, enc: &str) -> Episode {
+fn episode(id: &str, domain: Domain, n: usize, enc: FrameEncoding) -> Episode {
     Episode {
-        episode_id: id.into(),
-        domain: domain.into(),
-        kind: "demo".into(),
-        task_id: Some("draw/circle".into()),
-        task_family: Some("drawing".into()),
-        pair_id: None,
-        split: "train".into(),
-        n_frames: n,
-        fps: 10.0,
-        width: W as i32,
-        height: H as i32,
-        frame_encoding: enc.into(),
-        action_dim: None,
-        state_dim: None,
-        action_names: None,
-        state_names: None,
-        source_uri: format!("{id}.mp4"),
+        frame_encoding: enc,
         source_sha256: "ab".into(),
-        sidecar_uri: None,
-        duration_ns: n * 100_000_000,
-        ingested_at_us: 0,
+        ..milv_fixtures::episode(id, domain, n, (W as u32, H as u32))
     }
 }
 
 struct Ep {
     id: &'static str,
-    domain: &'static str,
+    domain: Domain,
     enc: FrameEncoding,
     frames: Vec<Vec<u8>>,
     /// Replace frame k's stored bytes with garbage.
     corrupt: Option<usize>,
 }
 
-fn ep(id: &'static str, domain: &'static str, seed: u32, n: u32, enc: FrameEncoding) -> Ep {
+fn ep(id: &'static str, domain: Domain, seed: u32, n: u32, enc: FrameEncoding) -> Ep {
     Ep {
         id,
         domain,
@@ -79,90 +58,39 @@ fn ep(id: &'static str, domain: &'static str, seed: u32, n: u32, enc: FrameEncod
 }
 
 fn commit_episodes(ds: &Dataset, eps: &[Ep]) -> u64 {
-    let mut txn = ds.begin(meta("ingest")).unwrap();
-    let mut w = txn
-        .shard_writer(TableKind::Frames, ShardOptions::default())
-        .unwrap();
-    for e in eps {
-        w.begin_episode().unwrap();
-        let mut rows = FrameRows::new();
-        for (i, f) in e.frames.iter().enumerate() {
-            let mut bytes = Vec::new();
-            frame_codec::encode(e.enc, f, W as u32, H as u32, &mut bytes).unwrap();
-            if e.corrupt == Some(i) {
-                bytes = b"\x89PNG\r\n\x1a\ngarbage".to_vec();
-            }
-            rows.push(e.id, i as i32, i as i64 * 100_000_000, &bytes, None, None);
-        }
-        w.push(rows.finish().unwrap()).unwrap();
-        w.end_episode().unwrap();
-    }
-    let frames = w.finish().unwrap();
-    let rows: Vec<Episode> = eps
+    let eps: Vec<(Episode, Vec<Frame>)> = eps
         .iter()
-        .map(|e| episode(e.id, e.domain, e.frames.len() as i64, e.enc.name()))
+        .map(|e| {
+            let frames = e
+                .frames
+                .iter()
+                .enumerate()
+                .map(|(i, f)| {
+                    let mut bytes = Vec::new();
+                    frame_codec::encode(e.enc, f, W as u32, H as u32, &mut bytes).unwrap();
+                    if e.corrupt == Some(i) {
+                        bytes = b"\x89PNG\r\n\x1a\ngarbage".to_vec();
+                    }
+                    Frame::image(bytes)
+                })
+                .collect();
+            (episode(e.id, e.domain, e.frames.len(), e.enc), frames)
+        })
         .collect();
-    let mut ew = txn
-        .shard_writer(TableKind::Episodes, ShardOptions::default())
-        .unwrap();
-    ew.begin_episode().unwrap();
-    ew.push(milv_data::episodes_to_batch(&rows).unwrap()).unwrap();
-    ew.end_episode().unwrap();
-    let ep_files = ew.finish().unwrap();
-    let ids: Vec<String> = eps.iter().map(|e| e.id.to_string()).collect();
-    txn.add_files(TableKind::Frames, frames, ids.clone());
-    txn.add_files(TableKind::Episodes, ep_files, ids);
-    txn.commit().unwrap()
+    milv_fixtures::commit_episodes(ds, &eps, meta("ingest")).unwrap()
 }
 
 /// Imagined rows (PNG) for an episode, of one model; `sizes` gives each frame's size.
 fn commit_imagined(ds: &Dataset, id: &str, model: &str, sizes: &[(usize, usize)]) -> u64 {
-    let mut txn = ds.begin(meta("translate")).unwrap();
-    let mut w = txn
-        .shard_writer(TableKind::Imagined, ShardOptions::default())
-        .unwrap();
-    let n = sizes.len();
-    let images: Vec<Vec<u8>> = sizes
+    let frames: Vec<ImaginedFrame> = sizes
         .iter()
         .enumerate()
-        .map(|(t, &(fw, fh))| {
-            let mut b = Vec::new();
-            frame_codec::encode(
-                FrameEncoding::Png,
-                &frame(9, t as u32, fw, fh),
-                fw as u32,
-                fh as u32,
-                &mut b,
-            )
-            .unwrap();
-            b
+        .map(|(t, &(fw, fh))| ImaginedFrame {
+            image: milv_fixtures::png(&frame(9, t as u32, fw, fh), fw as u32, fh as u32),
+            ..ImaginedFrame::default()
         })
         .collect();
-    let cols: Vec<ArrayRef> = vec![
-        Arc::new(StringArray::from(vec![id; n])),
-        Arc::new(Int32Array::from_iter_values(0..n as i32)),
-        Arc::new(Int64Array::from_iter_values(
-            (0..n as i64).map(|t| t * 100_000_000),
-        )),
-        Arc::new(StringArray::from(vec![model; n])),
-        Arc::new(BinaryArray::from_iter_values(images.iter().map(Vec::as_slice))),
-        Arc::new(BinaryArray::from(vec![None::<&[u8]>; n])),
-        Arc::new(StringArray::from(vec![None::<&str>; n])),
-        milv_data::arrow::array::new_null_array(
-            &milv_data::schema::list_of(milv_data::arrow::datatypes::DataType::Int32),
-            n,
-        ),
-        milv_data::arrow::array::new_null_array(
-            &milv_data::schema::list_of(milv_data::arrow::datatypes::DataType::Float32),
-            n,
-        ),
-    ];
-    let batch = RecordBatch::try_new(TableKind::Imagined.arrow_schema(), cols).unwrap();
-    w.begin_episode().unwrap();
-    w.push(batch).unwrap();
-    w.end_episode().unwrap();
-    txn.add_files(TableKind::Imagined, w.finish().unwrap(), vec![id.to_string()]);
-    txn.commit().unwrap()
+    milv_fixtures::commit_imagined(ds, model, &[(id, frames)], meta("translate")).unwrap()
 }
 
 fn opts(source: Source) -> RunOptions {
@@ -181,52 +109,21 @@ fn opts(source: Source) -> RunOptions {
 type Row = (String, i32, f64, f64, f64, Option<f64>, String);
 
 fn score_rows(ds: &Dataset, v: u64) -> Vec<Row> {
-    let mut out = Vec::new();
-    for b in ds.scan(TableKind::Scores, v, None).unwrap() {
-        let b = b.unwrap();
-        let s = |n: &str| {
-            b.column_by_name(n)
-                .unwrap()
-                .as_any()
-                .downcast_ref::<StringArray>()
-                .unwrap()
-                .clone()
-        };
-        let f = |n: &str| {
-            b.column_by_name(n)
-                .unwrap()
-                .as_any()
-                .downcast_ref::<Float64Array>()
-                .unwrap()
-                .clone()
-        };
-        let idx = b
-            .column_by_name("frame_index")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Int32Array>()
-            .unwrap()
-            .clone();
-        let (ids, runs, beta, br, ss, wt) = (
-            s("episode_id"),
-            s("run_id"),
-            f("beta"),
-            f("brenner"),
-            f("ssim"),
-            f("weight"),
-        );
-        for i in 0..b.num_rows() {
-            out.push((
-                ids.value(i).to_string(),
-                idx.value(i),
-                beta.value(i),
-                br.value(i),
-                ss.value(i),
-                wt.is_valid(i).then(|| wt.value(i)),
-                runs.value(i).to_string(),
-            ));
-        }
-    }
+    let mut out: Vec<Row> = milv_data::read::rows::<ScoreRow>(ds, v)
+        .unwrap()
+        .into_iter()
+        .map(|r| {
+            (
+                r.episode_id,
+                r.frame_index,
+                r.beta,
+                r.brenner,
+                r.ssim,
+                r.weight,
+                r.run_id,
+            )
+        })
+        .collect();
     out.sort_by(|a, b| (&a.0, a.1).cmp(&(&b.0, b.1)));
     out
 }
@@ -235,9 +132,9 @@ fn good_dataset() -> (tempfile::TempDir, Dataset, Vec<Ep>) {
     let dir = tempfile::tempdir().unwrap();
     let ds = Dataset::open_or_create(dir.path(), meta("create")).unwrap();
     let eps = vec![
-        ep("h1", "human", 1, 6, FrameEncoding::Png),
-        ep("h2", "human", 2, 5, FrameEncoding::Png),
-        ep("r1", "robot", 3, 7, FrameEncoding::Raw),
+        ep("h1", Domain::Human, 1, 6, FrameEncoding::Png),
+        ep("h2", Domain::Human, 2, 5, FrameEncoding::Png),
+        ep("r1", Domain::Robot, 3, 7, FrameEncoding::Raw),
     ];
     commit_episodes(&ds, &eps);
     (dir, ds, eps)
@@ -263,32 +160,15 @@ fn scores_equal_the_kernels_and_runs_are_idempotent_and_partitionable() {
                 "{}",
                 e.id
             );
-            let wt = milv_score::curate::weight(w.brenner.normalized, w.ssim, bmin, bmax);
+            let wt = milv_quality::set_weight(w.brenner.normalized, w.ssim, bmin, bmax);
             assert_eq!(g.5, Some(wt));
         }
     }
     // The normalisation is in every file's footer.
     let f = &ds.files(TableKind::Scores, 2).unwrap()[0];
-    let reader = milv_data::parquet::file::reader::SerializedFileReader::new(
-        std::fs::File::open(&f.abs_path).unwrap(),
-    )
-    .unwrap();
-    use milv_data::parquet::file::reader::FileReader as _;
-    let kv = reader
-        .metadata()
-        .file_metadata()
-        .key_value_metadata()
-        .unwrap()
-        .clone();
-    let params: serde_json::Value = serde_json::from_str(
-        kv.iter()
-            .find(|k| k.key == "milv.scores")
-            .unwrap()
-            .value
-            .as_deref()
-            .unwrap(),
-    )
-    .unwrap();
+    let kv = milv_data::read::file_metadata(f).unwrap();
+    let params: serde_json::Value =
+        serde_json::from_str(&kv.iter().find(|(k, _)| k == "milv.scores").unwrap().1).unwrap();
     assert_eq!(params["brenner_min"].as_f64(), Some(bmin));
     assert_eq!(params["run_id"].as_str(), Some(rep.run_id.as_str()));
 
@@ -333,31 +213,11 @@ fn scores_equal_the_kernels_and_runs_are_idempotent_and_partitionable() {
 }
 
 fn read_curated(ds: &Dataset, v: u64) -> Vec<(String, i32, f64)> {
-    let mut out = Vec::new();
-    for b in ds.scan(TableKind::Curated, v, None).unwrap() {
-        let b = b.unwrap();
-        let ids = b
-            .column_by_name("episode_id")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<StringArray>()
-            .unwrap();
-        let idx = b
-            .column_by_name("frame_index")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Int32Array>()
-            .unwrap();
-        let w = b
-            .column_by_name("weight")
-            .unwrap()
-            .as_any()
-            .downcast_ref::<Float64Array>()
-            .unwrap();
-        for i in 0..b.num_rows() {
-            out.push((ids.value(i).to_string(), idx.value(i), w.value(i)));
-        }
-    }
+    let mut out: Vec<(String, i32, f64)> = milv_data::read::rows::<CuratedRow>(ds, v)
+        .unwrap()
+        .into_iter()
+        .map(|r| (r.episode_id, r.frame_index, r.weight))
+        .collect();
     out.sort_by(|a, b| (&a.0, a.1).cmp(&(&b.0, b.1)));
     out
 }
@@ -424,12 +284,12 @@ fn curation_keeps_the_best_frames_and_replaces_the_previous_view() {
 fn bad_episodes_fail_the_run_clearly_and_nothing_is_committed() {
     let dir = tempfile::tempdir().unwrap();
     let ds = Dataset::open_or_create(dir.path(), meta("create")).unwrap();
-    let mut bad = ep("bad", "human", 4, 6, FrameEncoding::Png);
+    let mut bad = ep("bad", Domain::Human, 4, 6, FrameEncoding::Png);
     bad.corrupt = Some(3);
     let eps = vec![
-        ep("good", "human", 1, 6, FrameEncoding::Png),
+        ep("good", Domain::Human, 1, 6, FrameEncoding::Png),
         bad,
-        ep("one", "robot", 2, 1, FrameEncoding::Png),
+        ep("one", Domain::Robot, 2, 1, FrameEncoding::Png),
     ];
     let v = commit_episodes(&ds, &eps);
     let err = score_dataset(&ds, None, &opts(Source::Frames), meta("score"), &|_| {}).unwrap_err();
@@ -451,7 +311,8 @@ fn bad_episodes_fail_the_run_clearly_and_nothing_is_committed() {
 
     // Empty selections.
     let o = RunOptions {
-        domain: Some("alien".into()),
+        domain: Some(Domain::Robot),
+        episodes: Some(["good".to_string()].into()),
         ..opts(Source::Frames)
     };
     assert!(matches!(

@@ -1,68 +1,98 @@
 //! # milv-train — A-CycleGAN, imagined data, DAML/MILV meta-policies, one-shot evaluation
 //!
 //! The learning half of MILV (paper sections 4.1 and 4.2, Appendix A.2), on `tch`
-//! (libtorch from the PyPI `torch` wheel). Only this crate links libtorch.
+//! (libtorch from the PyPI `torch` wheel). Only this crate links libtorch. Two rooms and a
+//! floor; the meta room may use the translator the GAN room trained, never the reverse.
 //!
 //! | module | what |
 //! |---|---|
-//! | [`config`] | [`ModelConfig`] (network shapes) and [`TrainConfig`] (losses, rates, pool, seed) |
-//! | [`nets`] | generators (encoder + residual blocks + decoder), PatchGAN discriminators, inverse dynamics with spatial softmax |
-//! | [`cyclegan`] | [`ACycleGan`]: the losses of eq. 1–3, 7, 8 and one optimisation step |
-//! | [`adam`] | Adam with its moments in named tensors (exact resume) |
-//! | [`pool`] | the discriminators' image history |
-//! | [`data`] | [`TrainingSet`] from a pinned dataset version, the prefetching [`Loader`] |
-//! | [`checkpoint`] | safetensors checkpoints with configs, data digest and model id |
-//! | [`train`] | the training loop: progress, JSON-lines losses, translation grids, checkpoints, resume |
-//! | [`translate`] | human episodes → the `imagined` table (frames, f16 latents, actions) |
-//! | [`eval`] | SSIM of translations against ground-truth robot renderings, π_I's action error |
-//! | [`meta`] | the meta-policy (θ with pre- and post-update heads, the learned loss L_ψ), the second-order meta step, [`meta::Variant`] |
-//! | [`meta_data`] | per-task inner/outer sequences of each variant from a pinned version |
-//! | [`meta_train`] | the meta-training loop, policy checkpoints, the meta-step benchmark |
-//! | [`oneshot`] | one-shot evaluation in milv-sim, Wilson intervals, the success tables |
-//! | [`device`] | `cpu` / `cuda` / `auto` |
+//! | [`gan`] | A-CycleGAN with inverse dynamics: [`gan::config`], [`gan::nets`], [`gan::cyclegan`] (losses, step), [`gan::pool`], [`gan::data`] (training set, loader), [`gan::train`] (loop, grids, benches), [`gan::checkpoint`], [`gan::translate`] (→ `imagined`), [`gan::eval`] (translation quality) |
+//! | [`meta`] | DAML / MILV meta-policies: [`meta::policy`] (θ, ψ, the second-order meta step, [`meta::policy::Variant`]), [`meta::tasks`] (per-task sequences of each variant), [`meta::train`] (loop, policy checkpoints), [`meta::oneshot`] (one-shot evaluation in milv-sim, success tables) |
+//! | [`run`] | the floor: checkpoint folders, JSON-lines logs, tensor ↔ image and decoded clips, shared layers, Adam, devices, where a run starts ([`run::Start`]) |
 
-pub mod adam;
-pub mod checkpoint;
-pub mod config;
-pub mod cyclegan;
-pub mod data;
-pub mod device;
-pub mod eval;
+pub mod gan;
 pub mod meta;
-pub mod meta_data;
-pub mod meta_train;
-pub mod nets;
-pub mod oneshot;
-pub mod pool;
-pub mod train;
-pub mod translate;
+pub mod run;
 
-pub use config::{GanLoss, ModelConfig, TrainConfig};
-pub use cyclegan::{ACycleGan, Losses};
-pub use data::{Loader, TrainingSet};
+pub use gan::config::{GanLoss, ModelConfig, TrainConfig};
+pub use gan::cyclegan::{ACycleGan, Losses};
+pub use gan::data::{Loader, TrainingSet};
 
-use std::path::Path;
+use std::path::PathBuf;
 
-/// Why training, translation or evaluation failed.
+/// Why training, translation or evaluation failed. Paths come last in messages.
 #[derive(Debug, thiserror::Error)]
 pub enum Error {
     #[error(transparent)]
     Dataset(#[from] milv_data::Error),
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),
+    /// The data cannot be trained on or evaluated as asked.
     #[error("{0}")]
     Data(String),
+    /// Options or configurations that do not fit together.
     #[error("config: {0}")]
     Config(String),
+    #[error("{op}: {source}: {path}")]
+    Io {
+        op: &'static str,
+        #[source]
+        source: std::io::Error,
+        path: PathBuf,
+    },
+    #[error("{op}: {source}: {path}")]
+    Json {
+        op: &'static str,
+        #[source]
+        source: serde_json::Error,
+        path: PathBuf,
+    },
+    /// A tensor file (safetensors) that cannot be read or written.
+    #[error("checkpoint: {source}: {path}")]
+    Tensors {
+        #[source]
+        source: tch::TchError,
+        path: PathBuf,
+    },
+    /// A checkpoint that is incomplete, corrupt or of another kind.
+    #[error("checkpoint: {msg}: {path}")]
+    Checkpoint { msg: String, path: PathBuf },
+    /// Saved training state (optimizer moments, image pools) that does not fit the run.
     #[error("checkpoint: {0}")]
-    Checkpoint(String),
-    #[error("{0}")]
-    Io(String),
+    State(String),
+    #[error("cannot write the {what}: {source}: {path}")]
+    Write {
+        what: &'static str,
+        #[source]
+        source: Box<dyn std::error::Error + Send + Sync>,
+        path: PathBuf,
+    },
+    #[error("{what}: {source}")]
+    Frame {
+        what: String,
+        #[source]
+        source: milv_data::frame_codec::CodecError,
+    },
 }
 
 impl Error {
-    pub fn io(path: &Path, e: std::io::Error) -> Error {
-        Error::Io(format!("{e}: {}", path.display()))
+    /// Maps an I/O error on `path` (what was being done: `op`).
+    pub fn io(op: &'static str, path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> Error {
+        let path = path.into();
+        move |source| Error::Io { op, source, path }
+    }
+
+    /// Maps a safetensors read or write error of `path`.
+    pub fn tensors(path: impl Into<PathBuf>) -> impl FnOnce(tch::TchError) -> Error {
+        let path = path.into();
+        move |source| Error::Tensors { source, path }
+    }
+
+    pub fn checkpoint(msg: impl Into<String>, path: impl Into<PathBuf>) -> Error {
+        Error::Checkpoint {
+            msg: msg.into(),
+            path: path.into(),
+        }
     }
 }
 

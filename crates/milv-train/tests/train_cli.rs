@@ -8,8 +8,7 @@ use common::{json, run, s};
 
 use std::path::Path;
 
-use milv_data::arrow::array::{Array, BinaryArray, ListArray, StringArray};
-use milv_data::{Dataset, TableKind};
+use milv_data::{Dataset, ImaginedRecord, TableKind};
 
 /// `cyclegan DATASET --out RUN` with tiny networks and the default step count.
 fn fresh_run<'a>(ds: &'a Path, run: &'a Path) -> Vec<&'a str> {
@@ -112,33 +111,16 @@ fn trains_resumes_translates_and_evaluates() {
     // Every latent decodes to the recorded dtype and shape; every frame has an action.
     let ds = Dataset::open(&fx.root).unwrap();
     let v = ds.latest_version().unwrap();
-    let mut rows = 0;
-    for b in ds.scan(TableKind::Imagined, v, None).unwrap() {
-        let b = b.unwrap();
-        let col = |n: &str| b.column_by_name(n).unwrap();
-        let lat = col("latent").as_any().downcast_ref::<BinaryArray>().unwrap();
-        let dt = col("latent_dtype")
-            .as_any()
-            .downcast_ref::<StringArray>()
-            .unwrap();
-        let shape = col("latent_shape").as_any().downcast_ref::<ListArray>().unwrap();
-        let act = col("action").as_any().downcast_ref::<ListArray>().unwrap();
-        let models = col("model_id").as_any().downcast_ref::<StringArray>().unwrap();
-        for i in 0..b.num_rows() {
-            assert_eq!(models.value(i), model);
-            assert_eq!(dt.value(i), "f16");
-            let sh = shape.value(i);
-            let sh = sh
-                .as_any()
-                .downcast_ref::<milv_data::arrow::array::Int32Array>()
-                .unwrap();
-            assert_eq!(sh.values().to_vec(), vec![8, 8, 8]);
-            assert_eq!(lat.value(i).len(), 8 * 8 * 8 * 2);
-            assert_eq!(act.value(i).len(), 2);
-            assert!(!act.is_null(i));
-        }
-        rows += b.num_rows();
+    let rows = milv_data::read::rows::<ImaginedRecord>(&ds, v).unwrap();
+    for r in &rows {
+        assert_eq!(r.model_id, model);
+        let lat = r.latent.as_ref().unwrap();
+        assert_eq!(lat.dtype, "f16");
+        assert_eq!(lat.shape, vec![8, 8, 8]);
+        assert_eq!(lat.data.len(), 8 * 8 * 8 * 2);
+        assert_eq!(r.action.as_ref().unwrap().len(), 2);
     }
+    let rows = rows.len();
     assert_eq!(rows, fx.human_frames);
 
     let ev = json(&[

@@ -6,10 +6,10 @@
 use std::path::{Path, PathBuf};
 
 use milv_align::{AlignOptions, align_dataset, features};
-use milv_data::frame_codec::{FrameEncoding, encode};
-use milv_data::{CommitMeta, Dataset, Episode, FrameRows, ShardOptions, TableKind};
+use milv_data::{CommitMeta, Dataset, Domain, Episode, Kind, Split};
+use milv_fixtures::{Frame, commit_episodes};
 use milv_sim::env::{Rollout, Sim, SmoothRandom, Task, expert_action, paired_clips, rollout};
-use milv_sim::render::Domain;
+use milv_sim::render::Domain as SimDomain;
 use milv_sim::shapes;
 use rand::SeedableRng;
 
@@ -43,30 +43,32 @@ pub fn meta() -> CommitMeta {
     CommitMeta::for_this_process("milv-train-test", "fixture")
 }
 
-fn episode(name: &str, domain: Domain, kind: &str, split: &str, r: &Rollout, pair: Option<&str>) -> Episode {
-    Episode {
-        episode_id: name.into(),
-        domain: domain.name().into(),
-        kind: kind.into(),
+/// A rollout as a fixture episode with its frames (PNG, actions and states).
+fn episode(
+    name: &str,
+    domain: Domain,
+    kind: Kind,
+    split: Split,
+    r: &Rollout,
+    pair: Option<&str>,
+) -> (Episode, Vec<Frame>) {
+    let e = Episode {
+        kind,
+        split,
         task_id: Some("draw/x".into()),
-        task_family: Some("drawing".into()),
         pair_id: pair.map(String::from),
-        split: split.into(),
-        n_frames: r.frames.len() as i64,
-        fps: 10.0,
-        width: SIZE as i32,
-        height: SIZE as i32,
-        frame_encoding: "png".into(),
         action_dim: Some(2),
         state_dim: Some(2),
-        action_names: None,
-        state_names: None,
-        source_uri: format!("{name}.mp4"),
-        source_sha256: "00".into(),
-        sidecar_uri: None,
-        duration_ns: r.frames.len() as i64 * 100_000_000,
-        ingested_at_us: 0,
-    }
+        ..milv_fixtures::episode(name, domain, r.frames.len(), (SIZE, SIZE))
+    };
+    let frames = (0..r.frames.len())
+        .map(|i| Frame {
+            image: milv_fixtures::png(&r.frames[i], SIZE, SIZE),
+            action: Some(r.actions[i].to_vec()),
+            state: Some(r.states[i].to_vec()),
+        })
+        .collect();
+    (e, frames)
 }
 
 /// What [`sim_dataset`] wrote.
@@ -83,92 +85,57 @@ pub struct Fixture {
 pub fn sim_dataset(dir: &Path, tasks: usize, with_random: bool) -> Fixture {
     let root = dir.join("ds");
     let ds = Dataset::open_or_create(&root, meta()).unwrap();
-    let mut txn = ds.begin(meta()).unwrap();
-    let mut w = txn
-        .shard_writer(TableKind::Frames, ShardOptions::default())
-        .unwrap();
     let mut eps = Vec::new();
     let mut truth = String::new();
     let mut rng = rand::rngs::StdRng::seed_from_u64(5);
     let mut human_frames = 0;
     let shapes = shapes::training_shapes();
-    let mut add = |eps: &mut Vec<Episode>, e: Episode, r: &Rollout| {
-        w.begin_episode().unwrap();
-        let mut rows = FrameRows::new();
-        for (i, f) in r.frames.iter().enumerate() {
-            let mut png = Vec::new();
-            encode(FrameEncoding::Png, f, SIZE, SIZE, &mut png).unwrap();
-            rows.push(
-                &e.episode_id,
-                i as i32,
-                i as i64 * 100_000_000,
-                &png,
-                Some(&r.actions[i]),
-                Some(&r.states[i]),
-            );
-        }
-        w.push(rows.finish().unwrap()).unwrap();
-        w.end_episode().unwrap();
-        eps.push(e);
-    };
     for i in 0..tasks {
         let task = Task::Drawing {
             shape: shapes[i % shapes.len()].clone(),
         };
         let sim = |d| Sim::reset(task.clone(), d, SIZE).unwrap();
-        let h = rollout(sim(Domain::Human), expert_action);
-        let r = rollout(sim(Domain::Robot), expert_action);
+        let h = rollout(sim(SimDomain::Human), expert_action);
+        let r = rollout(sim(SimDomain::Robot), expert_action);
         human_frames += h.frames.len();
         let (hn, rn) = (format!("human_demo_{i}"), format!("robot_demo_{i}"));
-        add(
-            &mut eps,
-            episode(&hn, Domain::Human, "demo", "train", &h, None),
-            &h,
-        );
-        add(
-            &mut eps,
-            episode(&rn, Domain::Robot, "demo", "train", &r, None),
-            &r,
-        );
+        eps.push(episode(&hn, Domain::Human, Kind::Demo, Split::Train, &h, None));
+        eps.push(episode(&rn, Domain::Robot, Kind::Demo, Split::Train, &r, None));
         truth += &format!("{{\"human\":\"{hn}.mp4\",\"robot\":\"{rn}.mp4\"}}\n");
         if with_random {
-            for split in ["train", "test"].iter().take(if i == 0 { 2 } else { 1 }) {
+            for split in [Split::Train, Split::Test]
+                .into_iter()
+                .take(if i == 0 { 2 } else { 1 })
+            {
                 let mut policy = SmoothRandom::new(100 + i as u64);
-                let rr = rollout(sim(Domain::Robot), |s| policy.act(s));
+                let rr = rollout(sim(SimDomain::Robot), |s| policy.act(s));
                 let name = format!("robot_random_{i}_{split}");
-                add(
-                    &mut eps,
-                    episode(&name, Domain::Robot, "random", split, &rr, None),
-                    &rr,
-                );
+                eps.push(episode(&name, Domain::Robot, Kind::Random, split, &rr, None));
             }
         }
         let pair = paired_clips(&task, SIZE, 20, 16, &mut rng).unwrap();
         let pid = format!("pair-{i}");
         let hp = format!("human_paired_{i}");
         human_frames += pair.human.frames.len();
-        add(
-            &mut eps,
-            episode(&hp, Domain::Human, "paired", "train", &pair.human, Some(&pid)),
+        eps.push(episode(
+            &hp,
+            Domain::Human,
+            Kind::Paired,
+            Split::Train,
             &pair.human,
-        );
+            Some(&pid),
+        ));
         let rp = format!("robot_paired_{i}");
-        add(
-            &mut eps,
-            episode(&rp, Domain::Robot, "paired", "train", &pair.robot, Some(&pid)),
+        eps.push(episode(
+            &rp,
+            Domain::Robot,
+            Kind::Paired,
+            Split::Train,
             &pair.robot,
-        );
+            Some(&pid),
+        ));
     }
-    let ids: Vec<String> = eps.iter().map(|e| e.episode_id.clone()).collect();
-    txn.add_files(TableKind::Frames, w.finish().unwrap(), ids.clone());
-    let mut ew = txn
-        .shard_writer(TableKind::Episodes, ShardOptions::default())
-        .unwrap();
-    ew.begin_episode().unwrap();
-    ew.push(milv_data::episodes_to_batch(&eps).unwrap()).unwrap();
-    ew.end_episode().unwrap();
-    txn.add_files(TableKind::Episodes, ew.finish().unwrap(), ids);
-    txn.commit().unwrap();
+    commit_episodes(&ds, &eps, meta()).unwrap();
     let kind = features::by_name("state").unwrap();
     align_dataset(&ds, None, kind, &AlignOptions::default(), meta(), &|| {}).unwrap();
     let truth_path = dir.join("ground_truth.jsonl");

@@ -7,11 +7,12 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use milv_cli as cli;
 use milv_data::{Dataset, DatasetRef};
-use milv_train::checkpoint::{self, DataRef};
-use milv_train::meta::{Input, MetaConfig, MetaRun, PolicyConfig, Variant};
-use milv_train::meta_data::{MetaDataOptions, MetaSet};
-use milv_train::meta_train::{self, MetaRunOptions, PolicyMeta, Translator};
-use milv_train::oneshot::{self, EvalOptions, EvalRecord, Family, PolicyLearner};
+use milv_train::gan::checkpoint;
+use milv_train::meta::oneshot::{self, EvalOptions, EvalRecord, Family, PolicyLearner};
+use milv_train::meta::policy::{Input, MetaConfig, MetaRun, PolicyConfig, Variant};
+use milv_train::meta::tasks::{MetaDataOptions, MetaSet};
+use milv_train::meta::train::{self as meta_train, MetaRunOptions, PolicyMeta, Translator};
+use milv_train::run::{DataRef, Start};
 
 use crate::Runtime;
 
@@ -148,44 +149,28 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
     let dev = a.rt.apply()?;
     let ds = Dataset::open(&a.dataset.root)?;
     let ckpts = a.out.join("checkpoints");
-    let resumed = if a.resume {
-        meta_train::latest(&ckpts)?
-    } else {
-        None
-    };
-    if a.resume && resumed.is_none() {
+    let start = Start::resolve(
+        &ds,
+        &ckpts,
+        a.resume,
+        a.dataset.version,
+        meta_train::latest,
+        |d| Ok(meta_train::read_meta(d)?.1.data),
+    )?;
+    if start.nothing_to_resume {
         eprintln!(
             "milv-train meta: no checkpoint in {} yet; starting fresh",
             ckpts.display()
         );
     }
-    if !a.resume && meta_train::latest(&ckpts)?.is_some() {
-        bail!(
-            "{} already holds checkpoints: pass --resume to continue, or choose another --out",
-            ckpts.display()
-        );
-    }
     let tr = translator_for(a.variant, a.translator.as_ref())?;
-    let version = match &resumed {
-        Some(d) => {
-            let v = meta_train::read_meta(d)?.1.data.version;
-            if a.dataset.version.is_some_and(|w| w != v) {
-                bail!(
-                    "{} trained on version {v}, not {}",
-                    d.display(),
-                    a.dataset.version.unwrap_or_default()
-                );
-            }
-            v
-        }
-        None => ds.resolve(a.dataset.version)?,
-    };
+    let version = start.version;
     let image_size = match (&tr, a.size) {
         (Some(m), _) => m.model.image_size as u32,
         (None, Some(s)) => s,
         (None, None) => milv_data::ops::episodes(&ds, version)?
             .iter()
-            .find(|e| e.domain == "robot" && e.kind == "demo")
+            .find(|e| e.domain == milv_data::Domain::Robot && e.kind == milv_data::Kind::Demo)
             .map(|e| e.width as u32)
             .context("the dataset has no robot demonstrations")?,
     };
@@ -223,17 +208,10 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
              tell the translated frames apart: train the A-CycleGAN longer (check `milv-train eval-translation`)."
         );
     }
-    let (mut run, info) = match &resumed {
+    start.check_digest(&set.digest)?;
+    let (mut run, info) = match &start.checkpoint {
         Some(dir) => {
             let (mut run, info) = meta_train::load(dir, dev)?;
-            if info.data.digest != set.digest {
-                bail!(
-                    "{} trained on data digest {}, but version {version} now reads as {}: the data changed",
-                    dir.display(),
-                    info.data.digest,
-                    set.digest
-                );
-            }
             run.cfg.steps = a.steps;
             eprintln!("milv-train meta: resuming {} at step {}", dir.display(), run.step);
             (run, info)
@@ -324,7 +302,7 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
     Ok(cli::EXIT_OK)
 }
 
-pub fn cmd_eval(a: EvalArgs) -> anyhow::Result<u8> {
+pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
     let dev = a.rt.apply()?;
     let (run, info) =
         meta_train::load(&a.policy, dev).with_context(|| format!("loading policy {}", a.policy.display()))?;
@@ -371,7 +349,7 @@ pub fn cmd_eval(a: EvalArgs) -> anyhow::Result<u8> {
         image_size: info.image_size,
     };
     let bar = cli::bar(0, "trials");
-    let result = oneshot::evaluate(&mut learner, &opts, &mut |done, total| {
+    let result = oneshot::evaluate_one_shot(&mut learner, &opts, &mut |done, total| {
         bar.set_length(total as u64);
         bar.set_position(done as u64);
     })?;
@@ -386,7 +364,7 @@ pub fn cmd_eval(a: EvalArgs) -> anyhow::Result<u8> {
         result,
     };
     if let Some(o) = &a.out {
-        checkpoint::write_json(o, &record)?;
+        milv_train::run::folder::write_json(o, &record)?;
     }
     if a.rt.json {
         cli::print_json(&record)?;

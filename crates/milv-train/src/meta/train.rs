@@ -11,10 +11,10 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 use tch::{Device, Kind, Tensor};
 
-use crate::checkpoint::{DataRef, write_dir, write_json};
-use crate::meta::{Input, MetaConfig, MetaLosses, MetaRun, MetaTask, PolicyConfig, Variant};
-use crate::meta_data::MetaSet;
-use crate::train::append_json;
+use crate::meta::policy::{Input, MetaConfig, MetaLosses, MetaRun, MetaTask, PolicyConfig, Variant};
+use crate::meta::tasks::MetaSet;
+use crate::run::folder::{DataRef, write_dir, write_json};
+use crate::run::log::append_json;
 use crate::{Error, Result};
 
 const FORMAT: &str = "milv-meta/1";
@@ -66,7 +66,7 @@ pub fn save(run: &MetaRun, meta: &PolicyMeta, dir: &Path) -> Result<PathBuf> {
 
 /// The newest policy checkpoint in a run's `checkpoints/`.
 pub fn latest(dir: &Path) -> Result<Option<PathBuf>> {
-    crate::checkpoint::latest_with(dir, "policy.json")
+    crate::run::folder::latest_with(dir, "policy.json")
 }
 
 /// Reads `policy.json` of a checkpoint folder, or of the newest checkpoint of a run
@@ -76,13 +76,13 @@ pub fn read_meta(path: &Path) -> Result<(PathBuf, PolicyMeta)> {
         path.to_path_buf()
     } else {
         latest(&path.join("checkpoints"))?.ok_or_else(|| {
-            Error::Checkpoint(format!(
-                "{}: neither a policy checkpoint (policy.json) nor a run folder with checkpoints",
-                path.display()
-            ))
+            Error::checkpoint(
+                "neither a policy checkpoint (policy.json) nor a run folder with checkpoints",
+                path,
+            )
         })?
     };
-    let meta: PolicyMeta = crate::checkpoint::read_json_format(
+    let meta: PolicyMeta = crate::run::folder::read_json_format(
         &dir.join("policy.json"),
         "a policy checkpoint",
         FORMAT,
@@ -90,7 +90,7 @@ pub fn read_meta(path: &Path) -> Result<(PathBuf, PolicyMeta)> {
     )?;
     for f in ["policy.safetensors", "state.safetensors"] {
         if !dir.join(f).is_file() {
-            return Err(Error::Checkpoint(format!("{}: {f} is missing", dir.display())));
+            return Err(Error::checkpoint(format!("{f} is missing"), &dir));
         }
     }
     Ok((dir, meta))
@@ -102,8 +102,7 @@ pub fn load(path: &Path, device: Device) -> Result<(MetaRun, PolicyMeta)> {
     let mut run = MetaRun::new(meta.policy.clone(), meta.meta.clone(), device)?;
     run.net.load(&dir.join("policy.safetensors"))?;
     let sp = dir.join("state.safetensors");
-    let state =
-        Tensor::read_safetensors(&sp).map_err(|e| Error::Checkpoint(format!("{}: {e}", sp.display())))?;
+    let state = Tensor::read_safetensors(&sp).map_err(Error::tensors(&sp))?;
     run.adam.load_state(state)?;
     run.step = meta.step;
     Ok((run, meta))
@@ -144,7 +143,7 @@ pub fn train_meta(
     opts: &MetaRunOptions,
     on_step: &mut dyn FnMut(&MetaStepLog),
 ) -> Result<MetaReport> {
-    std::fs::create_dir_all(&opts.out).map_err(|e| Error::io(&opts.out, e))?;
+    std::fs::create_dir_all(&opts.out).map_err(Error::io("create folder", &opts.out))?;
     let losses_path = opts.out.join("losses.jsonl");
     let ckpt_dir = opts.out.join("checkpoints");
     let device = run.net.vs.device();
@@ -239,7 +238,7 @@ pub fn bench_meta(
             weights: Tensor::rand([frames], o),
         })
         .collect();
-    let t = crate::train::time_steps(warmup, steps, &mut || {
+    let t = crate::run::time_steps(warmup, steps, &mut || {
         run.step(&batch);
     });
     Ok(MetaBench {

@@ -14,12 +14,12 @@
 use std::collections::BTreeMap;
 
 use milv_data::view::{EpisodeView, Image, ViewOptions, ViewPlan};
-use milv_data::{Dataset, Episode, ops};
+use milv_data::{Dataset, Domain, Episode, Kind as EpisodeKind, Split, ops};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use tch::{Device, Tensor};
 
-use crate::data::{load_clips, to_chw};
-use crate::meta::{Input, MetaTask, Variant};
+use crate::meta::policy::{Input, MetaTask, Variant};
+use crate::run::image::{load_clips, to_chw};
 use crate::{Error, Result};
 
 /// One episode as the policy sees it.
@@ -87,13 +87,13 @@ fn task_of(e: &Episode) -> String {
 impl MetaSet {
     pub fn load(ds: &Dataset, v: u64, opts: &MetaDataOptions) -> Result<MetaSet> {
         let eps = ops::episodes(ds, v)?;
-        let demos = |domain: &str| -> BTreeMap<String, Episode> {
+        let demos = |domain: Domain| -> BTreeMap<String, Episode> {
             eps.iter()
-                .filter(|e| e.domain == domain && e.kind == "demo" && e.split == "train")
+                .filter(|e| e.domain == domain && e.kind == EpisodeKind::Demo && e.split == Split::Train)
                 .map(|e| (e.episode_id.clone(), e.clone()))
                 .collect()
         };
-        let humans = demos("human");
+        let humans = demos(Domain::Human);
         if humans.is_empty() {
             return Err(Error::Data(format!(
                 "version {v} has no human demonstrations (domain=human, kind=demo, split=train)"
@@ -116,7 +116,7 @@ impl MetaSet {
         };
         let mut parts: Vec<String> = vec!["milv-train/meta-data/1".into(), opts.variant.name().into()];
         match opts.variant {
-            Variant::Daml => set.load_daml(ds, v, &humans, &demos("robot"), opts.image_size)?,
+            Variant::Daml => set.load_daml(ds, v, &humans, &demos(Domain::Robot), opts.image_size)?,
             _ => {
                 let model = opts.model_id.clone().ok_or_else(|| {
                     Error::Config(format!(
@@ -180,7 +180,7 @@ impl MetaSet {
                  DAML's outer loss needs them"
             )));
         }
-        let tensor = |clip: &crate::data::Clip| -> Result<Tensor> {
+        let tensor = |clip: &crate::run::Clip| -> Result<Tensor> {
             let mut data = Vec::new();
             for t in 0..clip.frames.len() {
                 data.extend(clip.tensor_data(t, size)?);

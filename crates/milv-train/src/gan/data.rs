@@ -17,106 +17,12 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::thread::JoinHandle;
 
-use milv_data::arrow::array::Array;
-use milv_data::frame_codec::{self, FrameEncoding};
 use milv_data::read::{AlignedPair, AlignmentRun};
-use milv_data::{Dataset, Episode, TableKind, ops};
+use milv_data::{Dataset, Domain, Episode, Kind as EpisodeKind, Split, TableKind, ops};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 
 use crate::Error;
-
-/// One stored episode: encoded frames and, for robot random videos, actions.
-#[derive(Clone, Debug)]
-pub struct Clip {
-    pub episode_id: String,
-    pub encoding: FrameEncoding,
-    pub width: u32,
-    pub height: u32,
-    pub frames: Vec<Vec<u8>>,
-    pub timestamps: Vec<i64>,
-    pub actions: Option<Vec<Vec<f32>>>,
-}
-
-impl Clip {
-    /// Frame `t` as CHW f32 in [-1, 1] at `size`×`size` (resized when stored otherwise).
-    pub fn tensor_data(&self, t: usize, size: u32) -> Result<Vec<f32>, Error> {
-        let rgb = self.rgb(t)?;
-        Ok(to_chw(&rgb, self.width, self.height, size))
-    }
-
-    pub fn rgb(&self, t: usize) -> Result<Vec<u8>, Error> {
-        frame_codec::decode(self.encoding, &self.frames[t], self.width, self.height)
-            .map_err(|e| Error::Data(format!("episode {}: frame {t}: {e}", self.episode_id)))
-    }
-}
-
-/// RGB24 → CHW f32 in [-1, 1], resized (triangle filter) to `size`×`size` if needed.
-pub fn to_chw(rgb: &[u8], w: u32, h: u32, size: u32) -> Vec<f32> {
-    let resized;
-    let px: &[u8] = if (w, h) == (size, size) {
-        rgb
-    } else {
-        let img = image::RgbImage::from_raw(w, h, rgb.to_vec()).unwrap_or_default();
-        resized = image::imageops::resize(&img, size, size, image::imageops::FilterType::Triangle).into_raw();
-        &resized
-    };
-    let n = (size * size) as usize;
-    let mut out = vec![0.0f32; 3 * n];
-    for (i, p) in px.chunks_exact(3).enumerate() {
-        for c in 0..3 {
-            out[c * n + i] = f32::from(p[c]) / 127.5 - 1.0;
-        }
-    }
-    out
-}
-
-/// Reads the frames (and actions) of `wanted` episodes at version `v`.
-pub fn load_clips(
-    ds: &Dataset,
-    v: u64,
-    wanted: &BTreeMap<String, Episode>,
-    with_actions: bool,
-) -> Result<BTreeMap<String, Clip>, Error> {
-    let vector = with_actions.then_some("action");
-    let rows = milv_data::episode_rows(
-        ds,
-        v,
-        TableKind::Frames,
-        &|id| wanted.contains_key(id),
-        vector,
-        None,
-    )?;
-    rows.into_iter()
-        .map(|(id, r)| {
-            let actions = if with_actions {
-                let missing = r.vectors.iter().position(Option::is_none);
-                if let Some(t) = missing {
-                    return Err(Error::Data(format!("episode {id}: frame {t} has no action")));
-                }
-                r.all_vectors()
-            } else {
-                None
-            };
-            let ep = &wanted[&id];
-            let clip = Clip {
-                episode_id: id.clone(),
-                encoding: FrameEncoding::from_name(&ep.frame_encoding).unwrap_or(FrameEncoding::Png),
-                width: ep.width as u32,
-                height: ep.height as u32,
-                frames: r.images,
-                timestamps: r.timestamp_ns,
-                actions,
-            };
-            Ok((id, clip))
-        })
-        .collect()
-}
-
-pub fn downcast<T: 'static>(a: &Arc<dyn Array>) -> Result<&T, Error> {
-    a.as_any()
-        .downcast_ref::<T>()
-        .ok_or_else(|| Error::Data("a column has an unexpected type".into()))
-}
+use crate::run::image::{Clip, load_clips};
 
 /// The rows of one alignment run: `want` names a run id or a feature kind; without it
 /// the table must hold exactly one run.
@@ -158,14 +64,14 @@ pub struct DataOptions {
 impl TrainingSet {
     pub fn load(ds: &Dataset, v: u64, opts: &DataOptions) -> Result<TrainingSet, Error> {
         let eps = ops::episodes(ds, v)?;
-        let pick = |domain: &str, kind: &str| -> BTreeMap<String, Episode> {
+        let pick = |domain: Domain, kind: EpisodeKind| -> BTreeMap<String, Episode> {
             eps.iter()
-                .filter(|e| e.domain == domain && e.kind == kind && e.split == "train")
+                .filter(|e| e.domain == domain && e.kind == kind && e.split == Split::Train)
                 .map(|e| (e.episode_id.clone(), e.clone()))
                 .collect()
         };
-        let humans = pick("human", "demo");
-        let robots = pick("robot", "random");
+        let humans = pick(Domain::Human, EpisodeKind::Demo);
+        let robots = pick(Domain::Robot, EpisodeKind::Random);
         if humans.is_empty() {
             return Err(Error::Data(format!(
                 "version {v} has no human demonstrations (domain=human, kind=demo, split=train)"

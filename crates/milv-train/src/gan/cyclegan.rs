@@ -9,11 +9,11 @@ use serde::Serialize;
 use tch::nn::{self, Module};
 use tch::{Device, Kind, Reduction, Tensor};
 
-use crate::adam::Adam;
-use crate::config::{GanLoss, ModelConfig, TrainConfig};
-use crate::data::Batch;
-use crate::nets::{Discriminator, Encoder, Generator, InverseDynamics};
-use crate::pool::ImagePool;
+use crate::gan::config::{GanLoss, ModelConfig, TrainConfig};
+use crate::gan::data::Batch;
+use crate::gan::nets::{Discriminator, Encoder, Generator, InverseDynamics};
+use crate::gan::pool::ImagePool;
+use crate::run::adam::Adam;
 use crate::{Error, Result};
 
 /// The networks of a run, each in its own VarStore.
@@ -100,8 +100,7 @@ impl Nets {
     pub fn load(&mut self, dir: &Path) -> Result<()> {
         for (vs, name) in self.stores_mut().into_iter().zip(NET_FILES) {
             let path = dir.join(format!("{name}.safetensors"));
-            vs.load(&path)
-                .map_err(|e| Error::Checkpoint(format!("{}: {e}", path.display())))?;
+            vs.load(&path).map_err(Error::tensors(&path))?;
         }
         Ok(())
     }
@@ -278,7 +277,7 @@ impl ACycleGan {
         }
         for (name, o) in self.optimizers_mut() {
             o.load_state(per_opt.remove(name).unwrap_or_default())
-                .map_err(|e| Error::Checkpoint(format!("{name}: {e}")))?;
+                .map_err(|e| Error::State(format!("{name}: {e}")))?;
         }
         let find = |n: &str| {
             pools
@@ -433,7 +432,7 @@ mod tests {
     fn a_checkpoint_round_trips_and_resumes_exactly() {
         let _serial = crate::testing::torch_rng();
         let dir = tempfile::tempdir().unwrap();
-        let data = crate::checkpoint::DataRef {
+        let data = crate::run::DataRef {
             uri: "ds".into(),
             version: 3,
             digest: "d".into(),
@@ -448,8 +447,8 @@ mod tests {
         for b in &batches[..3] {
             first.step(b);
         }
-        let ckpt = crate::checkpoint::save(&first, &data, dir.path()).unwrap();
-        let (mut resumed, meta) = crate::checkpoint::load(&ckpt, Device::Cpu).unwrap();
+        let ckpt = crate::gan::checkpoint::save(&first, &data, dir.path()).unwrap();
+        let (mut resumed, meta) = crate::gan::checkpoint::load(&ckpt, Device::Cpu).unwrap();
         assert_eq!((meta.step, meta.data.version), (3, 3));
         // Loaded networks give bit-identical outputs.
         let x = first.images(&batches[0].x);

@@ -8,16 +8,16 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use milv_data::{Dataset, Episode, ops};
+use milv_data::{Dataset, Domain, Episode, Kind as EpisodeKind, Split, ops};
 use milv_quality::{Rgb, SsimMode, ssim};
 use serde::Serialize;
 use tch::nn::Module;
 use tch::{Kind, Tensor};
 
-use crate::config::ModelConfig;
-use crate::cyclegan::Nets;
-use crate::data::{Clip, load_clips, to_chw};
-use crate::train::to_rgb;
+use crate::gan::config::ModelConfig;
+use crate::gan::cyclegan::Nets;
+use crate::run::image::to_rgb;
+use crate::run::image::{Clip, load_clips, to_chw};
 use crate::{Error, Result};
 
 /// Frames translated per forward pass.
@@ -59,7 +59,7 @@ impl EvalSet {
         };
         let mut wanted_pairs: Vec<(String, String)> = Vec::new();
         if let Some(path) = truth {
-            let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+            let text = std::fs::read_to_string(path).map_err(Error::io("read", path))?;
             for (k, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
                 let j: serde_json::Value = serde_json::from_str(line)
                     .map_err(|e| Error::Data(format!("{}:{}: {e}", path.display(), k + 1)))?;
@@ -76,7 +76,8 @@ impl EvalSet {
                 }
             }
             // Held-out tasks first: they say most about generalisation.
-            wanted_pairs.sort_by_key(|(h, _)| eps.iter().any(|e| &e.episode_id == h && e.split == "train"));
+            wanted_pairs
+                .sort_by_key(|(h, _)| eps.iter().any(|e| &e.episode_id == h && e.split == Split::Train));
             wanted_pairs.truncate(max_pairs);
         }
         let pick = |ids: &[&String]| -> BTreeMap<String, Episode> {
@@ -94,9 +95,9 @@ impl EvalSet {
         let held: BTreeMap<String, Episode> = eps
             .iter()
             .filter(|e| {
-                e.domain == "robot"
-                    && e.kind == "random"
-                    && e.split != "train"
+                e.domain == Domain::Robot
+                    && e.kind == EpisodeKind::Random
+                    && e.split != Split::Train
                     && e.action_dim.unwrap_or(0) > 0
             })
             .map(|e| (e.episode_id.clone(), e.clone()))
@@ -127,7 +128,7 @@ pub struct EvalReport {
 }
 
 /// Evaluates `nets` on `set` (no gradients).
-pub fn evaluate(nets: &Nets, set: &EvalSet, cfg: &ModelConfig) -> Result<EvalReport> {
+pub fn evaluate_translation(nets: &Nets, set: &EvalSet, cfg: &ModelConfig) -> Result<EvalReport> {
     let size = cfg.image_size as u32;
     let dev = nets.vs_g.device();
     let batch = |c: &Clip, range: std::ops::Range<usize>| -> Result<Tensor> {

@@ -18,8 +18,8 @@ use serde::{Deserialize, Serialize};
 use tch::nn::{self, Init};
 use tch::{Device, Kind, Tensor};
 
-use crate::adam::Adam;
-use crate::nets::spatial_softmax;
+use crate::run::adam::Adam;
+use crate::run::layers::spatial_softmax;
 use crate::{Error, Result};
 
 /// Which of the paper's methods a policy is trained as.
@@ -363,9 +363,7 @@ impl PolicyNet {
     }
 
     pub fn load(&mut self, path: &std::path::Path) -> Result<()> {
-        self.vs
-            .load(path)
-            .map_err(|e| Error::Checkpoint(format!("{}: {e}", path.display())))
+        self.vs.load(path).map_err(Error::tensors(path))
     }
 }
 

@@ -24,9 +24,9 @@ use milv_sim::push::object_catalog;
 use milv_sim::render::Domain;
 use milv_sim::shapes::test_shapes;
 
-use crate::cyclegan::Nets;
-use crate::data::to_chw;
-use crate::meta::{Input, PolicyNet, Variant};
+use crate::gan::cyclegan::Nets;
+use crate::meta::policy::{Input, PolicyNet, Variant};
+use crate::run::image::to_chw;
 use crate::{Error, Result};
 
 /// Something that learns a task from one human video and then acts.
@@ -186,7 +186,7 @@ pub fn wilson95(k: usize, n: usize) -> [f64; 2] {
 }
 
 /// Runs the protocol; `progress(done, total)` after every trial.
-pub fn evaluate(
+pub fn evaluate_one_shot(
     learner: &mut dyn OneShot,
     opts: &EvalOptions,
     progress: &mut dyn FnMut(usize, usize),
@@ -474,7 +474,7 @@ mod tests {
                 seeds: vec![3],
                 image_size: 32,
             };
-            let got = evaluate(&mut Oracle, &opts, &mut |_, _| {}).unwrap();
+            let got = evaluate_one_shot(&mut Oracle, &opts, &mut |_, _| {}).unwrap();
             let mut expert = 0;
             for k in 0..family.tasks().len() {
                 for trial in 0..2 {

@@ -7,7 +7,8 @@
 use tch::Tensor;
 use tch::nn::{self, Module};
 
-use crate::config::ModelConfig;
+use crate::gan::config::ModelConfig;
+use crate::run::layers::spatial_softmax;
 
 fn instance_norm(x: &Tensor) -> Tensor {
     x.instance_norm::<Tensor>(None, None, None, None, true, 0.1, 1e-5, false)
@@ -192,20 +193,6 @@ impl LeakyRelu for Tensor {
     fn leaky_relu_with(&self, slope: f64) -> Tensor {
         self.maximum(&(self * slope))
     }
-}
-
-/// Expected (x, y) image coordinates in [-1, 1] of each channel's softmax over its pixels:
-/// `[B, C, H, W]` → `[B, 2C]` (Levine et al.'s spatial softmax).
-pub fn spatial_softmax(x: &Tensor) -> Tensor {
-    let (b, c, h, w) = x.size4().unwrap_or((1, 1, 1, 1));
-    let k = x.kind();
-    let p = x.view([b, c, h * w]).softmax(-1, k).view([b, c, h, w]);
-    let opts = (k, x.device());
-    let xs = Tensor::linspace(-1.0, 1.0, w, opts).view([1, 1, 1, w]);
-    let ys = Tensor::linspace(-1.0, 1.0, h, opts).view([1, 1, h, 1]);
-    let ex = (&p * xs).sum_dim_intlist([2i64, 3].as_slice(), false, k);
-    let ey = (&p * ys).sum_dim_intlist([2i64, 3].as_slice(), false, k);
-    Tensor::cat(&[ex, ey], 1)
 }
 
 /// Inverse dynamics π_I: the latents of two consecutive frames (concatenated on channels)

@@ -16,10 +16,10 @@ use serde::Serialize;
 use tch::nn::Module;
 use tch::{Kind, Tensor};
 
-use crate::config::ModelConfig;
-use crate::cyclegan::{ACycleGan, Nets};
-use crate::data::{downcast, load_clips};
-use crate::train::to_rgb;
+use crate::gan::config::ModelConfig;
+use crate::gan::cyclegan::{ACycleGan, Nets};
+use crate::run::image::load_clips;
+use crate::run::image::to_rgb;
 use crate::{Error, Result};
 
 /// How latents are stored.
@@ -92,22 +92,6 @@ pub struct TranslateReport {
     pub latent_shape: [i64; 3],
 }
 
-/// Episodes of `model_id` already in the imagined table at `v`.
-fn translated_by(ds: &Dataset, v: u64, model_id: &str) -> Result<BTreeSet<String>> {
-    let mut out = BTreeSet::new();
-    for b in ds.scan(TableKind::Imagined, v, Some(&["episode_id", "model_id"]))? {
-        let b = b?;
-        let ids = downcast::<milv_data::arrow::array::StringArray>(b.column(0))?;
-        let models = downcast::<milv_data::arrow::array::StringArray>(b.column(1))?;
-        for i in 0..b.num_rows() {
-            if models.value(i) == model_id {
-                out.insert(ids.value(i).to_string());
-            }
-        }
-    }
-    Ok(out)
-}
-
 /// Translates the selected human episodes of version `version` (default latest) and
 /// commits their rows; a re-run with the same model is a no-op.
 pub fn translate(
@@ -127,10 +111,10 @@ pub fn translate(
     {
         return Err(Error::Data(format!("no episode {missing} at version {v}")));
     }
-    let done = translated_by(ds, v, model_id)?;
+    let done = milv_data::run_groups(ds, v, TableKind::Imagined, model_id)?;
     let todo: Vec<&Episode> = eps
         .iter()
-        .filter(|e| e.domain == "human")
+        .filter(|e| e.domain == milv_data::Domain::Human)
         .filter(|e| opts.episodes.as_ref().is_none_or(|w| w.contains(&e.episode_id)))
         .filter(|e| opts.partition.is_none_or(|p| p.contains_key(&e.episode_id)))
         .collect();
@@ -164,34 +148,36 @@ pub fn translate(
         "model_config": cfg, "decoupled": run.train.decoupled,
     });
     let mut txn = ds.begin(meta)?;
-    let mut w = txn.shard_writer(TableKind::Imagined, ShardOptions::default())?;
-    let mut ids = Vec::new();
-    let written = (|| -> Result<()> {
-        for (k, e) in fresh.iter().enumerate() {
-            let one: BTreeMap<String, Episode> = [(e.episode_id.clone(), (*e).clone())].into();
-            let clip = load_clips(ds, v, &one, false)?
-                .remove(&e.episode_id)
-                .ok_or_else(|| {
-                    Error::Data(format!("episode {} has no frames at version {v}", e.episode_id))
+    let written = txn.write_groups(
+        TableKind::Imagined,
+        Some(model_id),
+        ShardOptions::default(),
+        |w| -> Result<()> {
+            for (k, e) in fresh.iter().enumerate() {
+                let one: BTreeMap<String, Episode> = [(e.episode_id.clone(), (*e).clone())].into();
+                let clip = load_clips(ds, v, &one, false)?
+                    .remove(&e.episode_id)
+                    .ok_or_else(|| {
+                        Error::Data(format!("episode {} has no frames at version {v}", e.episode_id))
+                    })?;
+                if !w.begin(&e.episode_id)? {
+                    continue; // translated meanwhile by another worker of this model
+                }
+                report.frames += translate_clip(nets, cfg, model_id, opts, &clip, &mut |rows| {
+                    w.push(rows)?;
+                    Ok(())
                 })?;
-            w.begin_episode()?;
-            report.frames += translate_clip(nets, cfg, model_id, opts, &clip, &mut |rows| {
-                w.push(rows.finish()?)?;
-                Ok(())
-            })?;
-            w.end_episode()?;
-            ids.push(e.episode_id.clone());
-            report.episodes += 1;
-            progress(k + 1, fresh.len());
-        }
-        Ok(())
-    })();
+                w.end()?;
+                report.episodes += 1;
+                progress(k + 1, fresh.len());
+            }
+            Ok(())
+        },
+    );
     if let Err(e) = written {
-        w.abort();
         txn.abort();
         return Err(e);
     }
-    txn.add_files(TableKind::Imagined, w.finish()?, ids);
     report.version = txn.commit()?;
     Ok(report)
 }
@@ -203,7 +189,7 @@ fn translate_clip(
     cfg: &ModelConfig,
     model_id: &str,
     opts: &TranslateOptions,
-    clip: &crate::data::Clip,
+    clip: &crate::run::Clip,
     emit: &mut dyn FnMut(&mut ImaginedRows) -> Result<()>,
 ) -> Result<u64> {
     let size = cfg.image_size as u32;
@@ -299,8 +285,8 @@ fn translate_clip(
 #[allow(clippy::unwrap_used)]
 mod tests {
     use super::*;
-    use milv_data::arrow::array::{Array, Float32Array, ListArray};
     use milv_data::frame_codec::{FrameEncoding, encode};
+    use milv_data::{ImaginedRecord, Row};
 
     /// The stored actions are π_I's on consecutive translated frames, through the encoder
     /// π_I trained on — for a decoupled model its own, not F's.
@@ -322,7 +308,7 @@ mod tests {
                     png
                 })
                 .collect();
-            let clip = crate::data::Clip {
+            let clip = crate::run::Clip {
                 episode_id: "e".into(),
                 encoding: FrameEncoding::Png,
                 width: 32,
@@ -337,16 +323,8 @@ mod tests {
             };
             let mut got: Vec<f32> = Vec::new();
             translate_clip(&nets, &cfg, "m", &opts, &clip, &mut |rows| {
-                let b = rows.finish()?;
-                let a = b
-                    .column_by_name("action")
-                    .unwrap()
-                    .as_any()
-                    .downcast_ref::<ListArray>()
-                    .unwrap();
-                for i in 0..b.num_rows() {
-                    let v = a.value(i);
-                    got.extend(v.as_any().downcast_ref::<Float32Array>().unwrap().values().iter());
+                for r in ImaginedRecord::from_batch(&rows.finish()?)? {
+                    got.extend(r.action.unwrap());
                 }
                 Ok(())
             })

@@ -5,19 +5,21 @@
 //! evaluation), `grids/step-N.png` (rows of human | G(human) | F(G(human))) and
 //! `checkpoints/step-N/`.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 
 use serde::Serialize;
-use tch::Tensor;
 use tch::nn::Module;
 
-use crate::checkpoint::{self, DataRef};
-use crate::cyclegan::{ACycleGan, Losses};
-use crate::data::{Loader, TrainingSet};
-use crate::eval::{EvalReport, EvalSet, evaluate};
+use crate::gan::checkpoint;
+use crate::gan::cyclegan::{ACycleGan, Losses};
+use crate::gan::data::{Loader, TrainingSet};
+use crate::gan::eval::{EvalReport, EvalSet, evaluate_translation};
+use crate::run::DataRef;
+use crate::run::image::to_rgb;
+use crate::run::log::append_json;
+use crate::run::time_steps;
 use crate::{Error, Result};
 
 #[derive(Clone, Debug)]
@@ -70,19 +72,9 @@ pub struct TrainReport {
     pub eval: Option<EvalReport>,
 }
 
-pub(crate) fn append_json(path: &Path, v: &impl Serialize) -> Result<()> {
-    let mut f = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(path)
-        .map_err(|e| Error::io(path, e))?;
-    let line = serde_json::to_string(v).map_err(|e| Error::Io(e.to_string()))?;
-    writeln!(f, "{line}").map_err(|e| Error::io(path, e))
-}
-
 /// Trains `run` up to `run.train.steps`, from wherever it stands (a resumed run starts
 /// at its checkpoint's step and draws the same batches an uninterrupted run would).
-pub fn train(
+pub fn train_cyclegan(
     run: &mut ACycleGan,
     set: Arc<TrainingSet>,
     data: &DataRef,
@@ -91,7 +83,7 @@ pub fn train(
     on_step: &mut dyn FnMut(&StepLog),
 ) -> Result<TrainReport> {
     for d in [opts.out.clone(), opts.out.join("grids")] {
-        std::fs::create_dir_all(&d).map_err(|e| Error::io(&d, e))?;
+        std::fs::create_dir_all(&d).map_err(Error::io("create folder", &d))?;
     }
     let losses_path = opts.out.join("losses.jsonl");
     let eval_path = opts.out.join("eval.jsonl");
@@ -102,7 +94,7 @@ pub fn train(
         set.clone(),
         run.train.seed,
         run.step,
-        crate::data::BatchShape {
+        crate::gan::data::BatchShape {
             images: run.train.batch as usize,
             transitions: run.train.idm_batch as usize,
         },
@@ -156,7 +148,7 @@ pub fn train(
         if let Some(e) = eval
             && (at(opts.eval_every) || (opts.eval_every > 0 && run.step == run.train.steps))
         {
-            let mut r = evaluate(&run.nets, e, &run.model)?;
+            let mut r = evaluate_translation(&run.nets, e, &run.model)?;
             r.step = run.step;
             append_json(&eval_path, &r)?;
             report.eval = Some(r);
@@ -184,20 +176,6 @@ fn grid_inputs(set: &TrainingSet, size: u32) -> Result<Vec<f32>> {
     Ok(out)
 }
 
-/// CHW f32 in [-1, 1] → RGB24.
-pub fn to_rgb(t: &Tensor) -> Result<Vec<u8>> {
-    let (c, h, w) = t.size3()?;
-    let v: Vec<f32> = Vec::try_from(t.to_device(tch::Device::Cpu).contiguous().view([-1]))?;
-    let n = (h * w) as usize;
-    let mut out = vec![0u8; n * 3];
-    for i in 0..n {
-        for ch in 0..c.min(3) as usize {
-            out[i * 3 + ch] = ((v[ch * n + i] + 1.0) * 127.5).round().clamp(0.0, 255.0) as u8;
-        }
-    }
-    Ok(out)
-}
-
 /// Rows of human | G(human) | F(G(human)).
 pub fn write_grid(run: &ACycleGan, src: &[f32], path: &Path) -> Result<()> {
     let s = run.model.image_size;
@@ -217,8 +195,11 @@ pub fn write_grid(run: &ACycleGan, src: &[f32], path: &Path) -> Result<()> {
             image::imageops::replace(&mut img, &tile, col as i64 * s, r * s);
         }
     }
-    img.save(path)
-        .map_err(|e| Error::Io(format!("{e}: {}", path.display())))
+    img.save(path).map_err(|e| Error::Write {
+        what: "translation grid",
+        source: Box::new(e),
+        path: path.to_path_buf(),
+    })
 }
 
 /// Timings of [`bench_steps`].
@@ -248,7 +229,7 @@ pub fn bench_steps(
             .map(|i| (((i as u64).wrapping_mul(2_654_435_761) ^ seed) % 2001) as f32 / 1000.0 - 1.0)
             .collect()
     };
-    let b = crate::data::Batch {
+    let b = crate::gan::data::Batch {
         step: 0,
         x: img(1),
         y: img(2),
@@ -271,36 +252,6 @@ pub fn bench_steps(
     })
 }
 
-/// Step timings: `warmup` untimed calls of `step`, then `steps` (at least 1) timed ones.
-#[derive(Clone, Copy, Debug)]
-pub struct Timings {
-    pub steps: u64,
-    pub median_ms: f64,
-    pub mean_ms: f64,
-    pub min_ms: f64,
-}
-
-pub fn time_steps(warmup: u64, steps: u64, step: &mut dyn FnMut()) -> Timings {
-    for _ in 0..warmup {
-        step();
-    }
-    let mut ms: Vec<f64> = (0..steps.max(1))
-        .map(|_| {
-            let t = Instant::now();
-            step();
-            t.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    let mean_ms = ms.iter().sum::<f64>() / ms.len() as f64;
-    ms.sort_by(f64::total_cmp);
-    Timings {
-        steps: ms.len() as u64,
-        median_ms: ms[ms.len() / 2],
-        mean_ms,
-        min_ms: ms[0],
-    }
-}
-
 /// The loader's throughput, against what training consumes.
 #[derive(Clone, Debug, Serialize)]
 pub struct LoaderBench {
@@ -320,7 +271,7 @@ pub fn bench_loader(
     batches: u64,
 ) -> Result<LoaderBench> {
     let per_batch = batch * if set.pairs.is_empty() { 4 } else { 6 };
-    let shape = crate::data::BatchShape {
+    let shape = crate::gan::data::BatchShape {
         images: batch,
         transitions: batch,
     };
@@ -343,13 +294,13 @@ pub fn bench_loader(
 /// Learning curves of runs (their `eval.jsonl`) as PNG charts in `out`: SSIM of the
 /// translations against ground truth, and π_I's action error. Returns the files written.
 pub fn plot_runs(runs: &[PathBuf], out: &Path) -> Result<Vec<PathBuf>> {
-    std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
+    std::fs::create_dir_all(out).map_err(Error::io("create folder", out))?;
     let mut ssim = Vec::new();
     let mut act = Vec::new();
     let mut baseline: Option<(f64, f64)> = None;
     for r in runs {
         let path = r.join("eval.jsonl");
-        let text = std::fs::read_to_string(&path).map_err(|e| Error::io(&path, e))?;
+        let text = std::fs::read_to_string(&path).map_err(Error::io("read", &path))?;
         let name = r
             .file_name()
             .map_or_else(|| r.display().to_string(), |n| n.to_string_lossy().into_owned());
@@ -394,8 +345,11 @@ pub fn plot_runs(runs: &[PathBuf], out: &Path) -> Result<Vec<PathBuf>> {
     }
     let files = [out.join("ssim.png"), out.join("action_mae.png")];
     let plot = |p: &Path, s: &[milv_plot::Series], title: &str, y: &str| {
-        milv_plot::lines_png(p, s, title, "training step", y)
-            .map_err(|e| Error::Io(format!("{e}: {}", p.display())))
+        milv_plot::lines_png(p, s, title, "training step", y).map_err(|e| Error::Write {
+            what: "chart",
+            source: Box::new(e),
+            path: p.to_path_buf(),
+        })
     };
     plot(
         &files[0],

@@ -86,13 +86,13 @@ impl Adam {
     /// Restores what [`Adam::state`] wrote; every variable must be there, same shapes.
     pub fn load_state(&mut self, state: Vec<(String, Tensor)>) -> Result<(), crate::Error> {
         let mut by_name: BTreeMap<String, Tensor> = state.into_iter().collect();
-        let missing = |k: &str| crate::Error::Checkpoint(format!("optimizer state lacks {k}"));
+        let missing = |k: &str| crate::Error::State(format!("optimizer state lacks {k}"));
         for ((name, p), (m, v)) in self.params.iter().zip(self.m.iter_mut().zip(self.v.iter_mut())) {
             for (prefix, slot) in [("m", &mut *m), ("v", &mut *v)] {
                 let key = format!("{prefix}.{name}");
                 let t = by_name.remove(&key).ok_or_else(|| missing(&key))?;
                 if t.size() != p.size() {
-                    return Err(crate::Error::Checkpoint(format!(
+                    return Err(crate::Error::State(format!(
                         "optimizer state {key} has shape {:?}, the variable {:?}",
                         t.size(),
                         p.size()

@@ -1,0 +1,8 @@
+//! DAML / MILV meta-policies (paper section 4.2): the policy and its second-order meta
+//! step, the per-task sequences of each variant, the meta-training loop and policy
+//! checkpoints, and one-shot evaluation in milv-sim.
+
+pub mod oneshot;
+pub mod policy;
+pub mod tasks;
+pub mod train;
