@@ -7,6 +7,7 @@ use std::process::ExitCode;
 use anyhow::Context as _;
 use clap::{Parser, Subcommand, ValueEnum};
 use milv::cli;
+use milv::ingest::{EpisodeMeta, Sidecar};
 use milv::sim::env::{Rollout, Sim, SmoothRandom, Task, evaluate, expert_action, paired_clips, rollout};
 use milv::sim::render::{Domain, Randomization};
 use milv::sim::shapes::{self, Shape};
@@ -110,32 +111,25 @@ fn shapes_of(split: Split) -> Vec<Shape> {
     }
 }
 
-fn write_episode(
-    out: &Path,
-    name: &str,
-    r: &Rollout,
-    size: u32,
-    meta: serde_json::Value,
-) -> anyhow::Result<()> {
+fn write_episode(out: &Path, name: &str, r: &Rollout, size: u32, meta: EpisodeMeta) -> anyhow::Result<()> {
     let video = out.join(format!("{name}.mp4"));
     let mut w = VideoWriter::create(&video, size, size, 10, Codec::H264)?;
     for f in &r.frames {
         w.write(f)?;
     }
     w.finish()?;
-    let sidecar = serde_json::json!({
-        "format": "milv-sidecar/1",
-        "episode": meta,
-        "action_names": ["dx", "dy"],
-        "state_names": ["x", "y"],
-        "actions": r.actions,
-        "states": r.states,
-    });
-    std::fs::write(
-        out.join(format!("{name}.json")),
-        serde_json::to_vec_pretty(&sidecar)?,
-    )
-    .with_context(|| format!("writing the sidecar of {}", video.display()))?;
+    let rows = |v: &[[f32; 2]]| Some(v.iter().map(|a| a.to_vec()).collect());
+    let sidecar = Sidecar {
+        path: out.join(format!("{name}.json")),
+        meta,
+        action_names: Some(vec!["dx".into(), "dy".into()]),
+        state_names: Some(vec!["x".into(), "y".into()]),
+        actions: rows(&r.actions),
+        states: rows(&r.states),
+    };
+    sidecar
+        .write(&sidecar.path)
+        .with_context(|| format!("writing the sidecar of {}", video.display()))?;
     Ok(())
 }
 
@@ -204,10 +198,14 @@ fn generate(
                 rollout(sim, |s| policy.act(s))
             };
             let name = format!("{}_{}_{kind}_{i:04}", task.family(), domain.name());
-            let meta = serde_json::json!({
-                "domain": domain.name(), "kind": kind, "task_id": task.id(),
-                "task_family": task.family(), "split": split_name,
-            });
+            let meta = EpisodeMeta {
+                domain: Some(domain.name().into()),
+                kind: Some(kind.into()),
+                task_id: Some(task.id()),
+                task_family: Some(task.family().into()),
+                split: Some(split_name.into()),
+                ..EpisodeMeta::default()
+            };
             write_episode(out, &name, &r, size, meta)?;
             manifest.push(
                 serde_json::json!({"path": format!("{name}.mp4"), "sidecar": format!("{name}.json"),
@@ -228,10 +226,15 @@ fn generate(
         let pair_id = format!("{}-{seed}-{i:04}", task.family());
         for (domain, r) in [(Domain::Human, &pair.human), (Domain::Robot, &pair.robot)] {
             let name = format!("{}_{}_paired_{i:04}", task.family(), domain.name());
-            let meta = serde_json::json!({
-                "domain": domain.name(), "kind": "paired", "task_id": task.id(),
-                "task_family": task.family(), "split": split_name, "pair_id": pair_id,
-            });
+            let meta = EpisodeMeta {
+                domain: Some(domain.name().into()),
+                kind: Some("paired".into()),
+                task_id: Some(task.id()),
+                task_family: Some(task.family().into()),
+                split: Some(split_name.into()),
+                pair_id: Some(pair_id.clone()),
+                ..EpisodeMeta::default()
+            };
             write_episode(out, &name, r, size, meta)?;
             manifest.push(
                 serde_json::json!({"path": format!("{name}.mp4"), "sidecar": format!("{name}.json"),

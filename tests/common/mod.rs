@@ -78,23 +78,27 @@ pub fn make_clip(path: &Path, frames: u32, w: u32, h: u32, seed: u32) {
     );
 }
 
-/// A JSON sidecar with `n` action rows [i, -i] and metadata.
+/// A JSON sidecar with `n` action rows [i, -i] and metadata (`extra`: more metadata keys).
 pub fn write_sidecar(path: &Path, n: usize, domain: &str, extra: serde_json::Value) {
-    let actions: Vec<[f32; 2]> = (0..n).map(|i| [i as f32 * 0.5, -(i as f32)]).collect();
-    let mut episode =
-        serde_json::json!({"domain": domain, "task_id": "draw/circle", "task_family": "drawing"});
+    let mut meta = milv::ingest::EpisodeMeta {
+        domain: Some(domain.into()),
+        task_id: Some("draw/circle".into()),
+        task_family: Some("drawing".into()),
+        ..Default::default()
+    };
     if let serde_json::Value::Object(m) = extra {
         for (k, v) in m {
-            episode[k] = v;
+            meta.set(&k, v.as_str().unwrap()).unwrap();
         }
     }
-    let v = serde_json::json!({
-        "format": "milv-sidecar/1",
-        "episode": episode,
-        "action_names": ["dx", "dy"],
-        "actions": actions,
-    });
-    std::fs::write(path, serde_json::to_string(&v).unwrap()).unwrap();
+    let sidecar = milv::ingest::Sidecar {
+        path: path.to_path_buf(),
+        meta,
+        action_names: Some(vec!["dx".into(), "dy".into()]),
+        actions: Some((0..n).map(|i| vec![i as f32 * 0.5, -(i as f32)]).collect()),
+        ..Default::default()
+    };
+    sidecar.write(path).unwrap();
 }
 
 /// A clip plus its sidecar beside it; returns the clip path.

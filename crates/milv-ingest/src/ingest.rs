@@ -572,10 +572,6 @@ fn ingest_attempt(
 ) -> Result<IngestReport> {
     let mut txn = ds.begin(meta)?;
     let base = txn.base_version();
-    let existing: BTreeSet<String> = milv_data::ops::episodes(ds, base)?
-        .into_iter()
-        .map(|e| e.episode_id)
-        .collect();
     let mut report = IngestReport {
         dataset: ds.root().display().to_string(),
         version: base,
@@ -587,6 +583,71 @@ fn ingest_attempt(
         resumed: 0,
         warnings: Vec::new(),
     };
+    let todo = plan_batch(ds, base, inputs, opts, &mut report)?;
+    // Reuse what an interrupted run of this same batch already finished.
+    let pending: BTreeSet<String> = todo.iter().map(|p| p.episode_id.clone()).collect();
+    let (journal, adopted) = Journal::open(ds.root(), &ds.table_root(TableKind::Frames), &pending)?;
+    let adopted_ids: BTreeSet<&str> = adopted.episodes.iter().map(|e| e.episode_id.as_str()).collect();
+    let (resumed, todo): (Vec<Planned>, Vec<Planned>) = todo
+        .into_iter()
+        .partition(|p| adopted_ids.contains(p.episode_id.as_str()));
+    progress.planned(todo.len(), 0);
+
+    let results = write_frames(ds, &txn, &todo, opts, &journal, progress)?;
+    let (frame_files, mut episodes, mut digests, fatal) = collect_outcomes(results, &mut report);
+    for p in &resumed {
+        let n_frames = adopted
+            .episodes
+            .iter()
+            .find(|e| e.episode_id == p.episode_id)
+            .map_or(0, |e| e.n_frames);
+        report.frames += n_frames as u64;
+        report.ingested.push(Ingested {
+            episode_id: p.episode_id.clone(),
+            source: source_name(&p.source),
+            n_frames,
+        });
+        digests.extend(input_digests(p));
+    }
+    report.resumed = resumed.len();
+    report.resumed = resumed.len();
+    let new_ids: Vec<String> = episodes.iter().map(|e| e.episode_id.clone()).collect();
+    txn.add_files(TableKind::Frames, frame_files, new_ids);
+    let adopted_ids: Vec<String> = adopted.episodes.iter().map(|e| e.episode_id.clone()).collect();
+    txn.adopt_files(TableKind::Frames, adopted.files, adopted_ids);
+    episodes.extend(adopted.episodes);
+    if let Some(e) = fatal {
+        txn.abort();
+        return Err(e);
+    }
+    if episodes.is_empty() {
+        txn.abort();
+        journal.remove();
+        return Ok(report);
+    }
+    if let Err(e) = txn.add_episode_rows(&episodes) {
+        txn.abort();
+        return Err(e.into());
+    }
+    report.version = commit_batch(txn, digests, opts, &mut report)?;
+    journal.remove();
+    Ok(report)
+}
+
+/// Phase 1: plans the selected inputs (this worker's partition): metadata, digests and
+/// episode ids; inputs already in the dataset are skipped, duplicates within the batch
+/// and unplannable ones fail. Returns the episodes to ingest.
+fn plan_batch(
+    ds: &Dataset,
+    base: u64,
+    inputs: &[InputSpec],
+    opts: &IngestOptions,
+    report: &mut IngestReport,
+) -> Result<Vec<Planned>> {
+    let existing: BTreeSet<String> = milv_data::ops::episodes(ds, base)?
+        .into_iter()
+        .map(|e| e.episode_id)
+        .collect();
     let selected: Vec<&InputSpec> = inputs
         .iter()
         .enumerate()
@@ -625,15 +686,24 @@ fn ingest_attempt(
             }
         }
     }
-    // Reuse what an interrupted run of this same batch already finished.
-    let pending: BTreeSet<String> = todo.iter().map(|p| p.episode_id.clone()).collect();
-    let (journal, adopted) = Journal::open(ds.root(), &ds.table_root(TableKind::Frames), &pending)?;
-    let adopted_ids: BTreeSet<&str> = adopted.episodes.iter().map(|e| e.episode_id.as_str()).collect();
-    let (resumed, todo): (Vec<Planned>, Vec<Planned>) = todo
-        .into_iter()
-        .partition(|p| adopted_ids.contains(p.episode_id.as_str()));
-    progress.planned(todo.len(), 0);
+    Ok(todo)
+}
 
+type Outcome<'p> = (&'p Planned, Result<Episode>);
+/// What one writer thread produced: its files (or the error that stopped it), and each
+/// episode's outcome.
+type WorkerResult<'p> = (Result<Vec<FileAdd>>, Vec<Outcome<'p>>);
+
+/// Phase 2: decodes and writes the episodes' frames on `opts.jobs` threads, one shard
+/// writer each, journaling every closed file so an interrupted run can adopt it.
+fn write_frames<'p>(
+    ds: &Dataset,
+    txn: &milv_data::Transaction<'_>,
+    todo: &'p [Planned],
+    opts: &IngestOptions,
+    journal: &Journal,
+    progress: &dyn Progress,
+) -> Result<Vec<WorkerResult<'p>>> {
     let jobs = opts.jobs.max(1);
     let workers = jobs.min(todo.len()).max(1);
     let pool = rayon::ThreadPoolBuilder::new()
@@ -649,19 +719,17 @@ fn ingest_attempt(
         writers.push(txn.shard_writer(TableKind::Frames, shard.clone())?);
     }
     let (tx, rx) = crossbeam_channel::unbounded::<&Planned>();
-    for p in &todo {
+    for p in todo {
         // Unbounded is fine: the channel holds references, not frames.
         let _ = tx.send(p);
     }
     drop(tx);
-    type Outcome<'p> = (&'p Planned, Result<Episode>);
-    let results: Vec<(Result<Vec<FileAdd>>, Vec<Outcome<'_>>)> = std::thread::scope(|s| {
+    let results: Vec<WorkerResult<'p>> = std::thread::scope(|s| {
         let handles: Vec<_> = writers
             .into_iter()
             .map(|mut w| {
                 let rx = rx.clone();
                 let pool = &pool;
-                let journal = &journal;
                 s.spawn(move || {
                     let mut outcomes = Vec::new();
                     let mut unjournaled: BTreeMap<String, Episode> = BTreeMap::new();
@@ -724,6 +792,15 @@ fn ingest_attempt(
             .collect()
     });
 
+    Ok(results)
+}
+
+/// Phase 3: the workers' files, the episodes that made it (with their input digests)
+/// and the first fatal error; failed episodes go to the report.
+fn collect_outcomes(
+    results: Vec<WorkerResult<'_>>,
+    report: &mut IngestReport,
+) -> (Vec<FileAdd>, Vec<Episode>, Vec<InputDigest>, Option<Error>) {
     let mut frame_files = Vec::new();
     let mut episodes = Vec::new();
     let mut digests = Vec::new();
@@ -752,39 +829,16 @@ fn ingest_attempt(
             }
         }
     }
-    for p in &resumed {
-        let n_frames = adopted
-            .episodes
-            .iter()
-            .find(|e| e.episode_id == p.episode_id)
-            .map_or(0, |e| e.n_frames);
-        report.frames += n_frames as u64;
-        report.ingested.push(Ingested {
-            episode_id: p.episode_id.clone(),
-            source: source_name(&p.source),
-            n_frames,
-        });
-        digests.extend(input_digests(p));
-    }
-    report.resumed = resumed.len();
-    let new_ids: Vec<String> = episodes.iter().map(|e| e.episode_id.clone()).collect();
-    txn.add_files(TableKind::Frames, frame_files, new_ids);
-    let adopted_ids: Vec<String> = adopted.episodes.iter().map(|e| e.episode_id.clone()).collect();
-    txn.adopt_files(TableKind::Frames, adopted.files, adopted_ids);
-    episodes.extend(adopted.episodes);
-    if let Some(e) = fatal {
-        txn.abort();
-        return Err(e);
-    }
-    if episodes.is_empty() {
-        txn.abort();
-        journal.remove();
-        return Ok(report);
-    }
-    if let Err(e) = txn.add_episode_rows(&episodes) {
-        txn.abort();
-        return Err(e.into());
-    }
+    (frame_files, episodes, digests, fatal)
+}
+
+/// Phase 4: records what the version holds and commits it.
+fn commit_batch(
+    mut txn: milv_data::Transaction<'_>,
+    digests: Vec<InputDigest>,
+    opts: &IngestOptions,
+    report: &mut IngestReport,
+) -> Result<u64> {
     let m = txn.meta_mut();
     m.inputs = digests;
     m.summary = serde_json::json!({
@@ -797,7 +851,7 @@ fn ingest_attempt(
         "fps": opts.fps,
         "partition": opts.partition.map(|p| format!("{}/{}", p.index, p.count)),
     });
-    report.version = match txn.commit() {
+    Ok(match txn.commit() {
         Ok(v) => v,
         Err(milv_data::Error::NotYetInDelta { version, source }) => {
             report.warnings.push(format!(
@@ -807,9 +861,7 @@ fn ingest_attempt(
             version
         }
         Err(e) => return Err(e.into()),
-    };
-    journal.remove();
-    Ok(report)
+    })
 }
 
 fn input_digests(p: &Planned) -> Vec<InputDigest> {

@@ -3,21 +3,28 @@
 
 use std::path::{Path, PathBuf};
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
 
 /// Episode metadata from flags, a sidecar or a manifest line; each field optional so the
 /// three can be layered (manifest over sidecar over flags).
-#[derive(Clone, Debug, Default, PartialEq, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct EpisodeMeta {
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub domain: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub kind: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub task_id: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub task_family: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub pair_id: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub split: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub fps: Option<f64>,
 }
 
@@ -70,16 +77,55 @@ pub struct Sidecar {
     pub states: Option<Vec<Vec<f32>>>,
 }
 
-#[derive(Deserialize)]
+/// The JSON form, both ways (every key but `format` optional).
+#[derive(Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 struct JsonSidecar {
     format: Option<String>,
     #[serde(default)]
     episode: EpisodeMeta,
+    #[serde(skip_serializing_if = "Option::is_none")]
     action_names: Option<Vec<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     state_names: Option<Vec<String>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     actions: Option<Vec<Vec<f64>>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     states: Option<Vec<Vec<f64>>>,
+}
+
+impl Sidecar {
+    /// The sidecar as `milv-sidecar/1` JSON (keys sorted, pretty-printed), as `read`
+    /// reads it back.
+    pub fn to_json(&self) -> String {
+        let rows = |r: &Option<Vec<Vec<f32>>>| {
+            r.as_ref().map(|r| {
+                r.iter()
+                    .map(|row| row.iter().map(|&v| f64::from(v)).collect())
+                    .collect()
+            })
+        };
+        let raw = JsonSidecar {
+            format: Some(SIDECAR_FORMAT.into()),
+            episode: self.meta.clone(),
+            action_names: self.action_names.clone(),
+            state_names: self.state_names.clone(),
+            actions: rows(&self.actions),
+            states: rows(&self.states),
+        };
+        // Through a Value: its maps sort their keys, so the text is canonical.
+        let value = serde_json::to_value(&raw).unwrap_or_default();
+        serde_json::to_string_pretty(&value).unwrap_or_default()
+    }
+
+    /// Writes [`Sidecar::to_json`] to `path`.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        std::fs::write(path, self.to_json()).map_err(|e| Error::Io {
+            op: "write sidecar",
+            source: e,
+            path: path.to_path_buf(),
+        })
+    }
 }
 
 pub const SIDECAR_FORMAT: &str = "milv-sidecar/1";
@@ -366,5 +412,26 @@ mod tests {
         let m = side.over(&flags);
         assert_eq!(m.domain.as_deref(), Some("robot"));
         assert_eq!(m.split.as_deref(), Some("val"));
+    }
+
+    #[test]
+    fn a_written_sidecar_reads_back() {
+        let s = Sidecar {
+            path: PathBuf::from("x.json"),
+            meta: EpisodeMeta {
+                domain: Some("robot".into()),
+                kind: Some("random".into()),
+                pair_id: Some("p1".into()),
+                ..EpisodeMeta::default()
+            },
+            action_names: Some(vec!["dx".into(), "dy".into()]),
+            state_names: None,
+            actions: Some(vec![vec![0.5, -0.1], vec![0.25, 3.0]]),
+            states: None,
+        };
+        let text = s.to_json();
+        assert!(text.contains("\"format\": \"milv-sidecar/1\""), "{text}");
+        assert!(!text.contains("states") && !text.contains("task_id"), "{text}");
+        assert_eq!(parse_json(&s.path, &text).unwrap(), s);
     }
 }
