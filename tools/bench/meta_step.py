@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The second-order meta step of milv-train, written in plain PyTorch eager, timed beside ours.
 
-Same policy (crates/milv-train/src/meta.rs): convolutions of 16 5×5 filters (latents:
+Same policy (crates/milv-train/src/meta/policy.rs): convolutions of 16 5×5 filters (latents:
 strides 2, 2, 1; images: 2, 2, 2, 1, 1, 1), spatial softmax, three hidden layers of 100,
 a pre-update head of 20 read by the learned loss L_ψ (temporal convolutions 10, 10, 1
 with 10 filters, squared output), a post-update action head; one inner step

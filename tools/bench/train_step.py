@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """The A-CycleGAN step of milv-train, written in plain PyTorch eager, timed beside ours.
 
-Same networks (crates/milv-train/src/nets.rs), same losses and order (generators and the
+Same networks (crates/milv-train/src/gan/nets.rs), same losses and order (generators and the
 inverse-dynamics model in one backward pass against frozen discriminators, then both
 discriminators on an image pool), batch 1, Adam, the same thread count, one process each,
 in one run. Prints a Markdown table and writes JSON with --json.

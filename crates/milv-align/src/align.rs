@@ -419,8 +419,7 @@ pub fn align_dataset(
         "pairs": report.pairs.len(), "failed": report.failed.len(), "rows": report.rows,
         "untrusted": report.pairs.iter().filter(|p| !p.trusted).map(|p| &p.pair_id).collect::<Vec<_>>(),
     });
-    let mut txn = ds.begin(meta)?;
-    let written = txn.write_groups(
+    report.version = ds.begin(meta)?.write_and_commit(
         TableKind::Alignments,
         Some(&run_id),
         ShardOptions::default(),
@@ -430,12 +429,7 @@ pub fn align_dataset(
             }
             Ok(())
         },
-    );
-    if let Err(e) = written {
-        txn.abort();
-        return Err(e);
-    }
-    report.version = txn.commit()?;
+    )?;
     Ok(report)
 }
 

@@ -679,6 +679,10 @@ fn strings<'a, R>(rows: &'a [R], f: impl Fn(&'a R) -> &'a str) -> ArrayRef {
     Arc::new(StringArray::from_iter_values(rows.iter().map(f)))
 }
 
+fn opt_strings<'a, R>(rows: &'a [R], f: impl Fn(&'a R) -> Option<&'a str>) -> ArrayRef {
+    Arc::new(rows.iter().map(f).collect::<StringArray>())
+}
+
 fn f64s<R>(rows: &[R], f: impl Fn(&R) -> f64) -> ArrayRef {
     Arc::new(Float64Array::from_iter_values(rows.iter().map(f)))
 }
@@ -699,11 +703,7 @@ impl Row for ScoreRow {
             strings(rows, |r| &r.episode_id),
             i32s(rows, |r| r.frame_index),
             strings(rows, |r| &r.source_table),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.model_id.as_deref())
-                    .collect::<StringArray>(),
-            ),
+            opt_strings(rows, |r| r.model_id.as_deref()),
             strings(rows, |r| &r.run_id),
             f64s(rows, |r| r.brenner_raw),
             f64s(rows, |r| r.brenner),
@@ -769,11 +769,7 @@ impl Row for CuratedRow {
             i32s(rows, |r| r.frame_index),
             f64s(rows, |r| r.weight),
             strings(rows, |r| &r.source_table),
-            Arc::new(
-                rows.iter()
-                    .map(|r| r.model_id.as_deref())
-                    .collect::<StringArray>(),
-            ),
+            opt_strings(rows, |r| r.model_id.as_deref()),
             strings(rows, |r| &r.run_id),
             strings(rows, |r| &r.curation_id),
         ];

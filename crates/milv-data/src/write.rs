@@ -154,6 +154,23 @@ impl Transaction<'_> {
         Ok(w.written)
     }
 
+    /// [`Transaction::write_groups`], then the commit: the new version, or the base
+    /// version when the run already held every group. On an error nothing is committed
+    /// and every file this transaction wrote is deleted.
+    pub fn write_and_commit<E: From<Error>>(
+        mut self,
+        table: TableKind,
+        run: Option<&str>,
+        opts: ShardOptions,
+        fill: impl FnOnce(&mut GroupWriter) -> std::result::Result<(), E>,
+    ) -> std::result::Result<u64, E> {
+        if let Err(e) = self.write_groups(table, run, opts, fill) {
+            self.abort();
+            return Err(e);
+        }
+        Ok(self.commit()?)
+    }
+
     /// Adds these rows to the `episodes` table, one group per episode.
     pub fn add_episode_rows(&mut self, episodes: &[Episode]) -> Result<Written> {
         self.write_groups(

@@ -154,17 +154,12 @@ pub fn curate(ds: &Dataset, opts: &CurateOptions, mut meta: CommitMeta) -> Resul
         file_metadata: vec![("milv.curation".into(), params.to_string())],
         ..ShardOptions::default()
     };
-    let written = txn.write_groups(TableKind::Curated, None, shard, |w| -> Result<()> {
+    report.version = txn.write_and_commit(TableKind::Curated, None, shard, |w| -> Result<()> {
         for (id, frames) in &kept {
             w.group(id, &curated_rows(id, frames, &run_id, &curation_id))?;
         }
         Ok(())
-    });
-    if let Err(e) = written {
-        txn.abort();
-        return Err(e);
-    }
-    report.version = txn.commit()?;
+    })?;
     Ok(report)
 }
 

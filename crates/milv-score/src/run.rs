@@ -282,22 +282,18 @@ pub fn score_dataset(
         "scores": params, "episodes": report.episodes_scored, "frames": report.frames_scored,
         "failed": report.failed.len(),
     });
-    let mut txn = ds.begin(meta)?;
     let norm = report.weights_written.then_some((bmin, bmax));
-    let written = txn.write_groups(TableKind::Scores, Some(&run_id), shard, |w| -> Result<()> {
-        for (id, scores) in &scored {
-            w.group(
-                id,
-                &score_rows(id, scores, table, model_id.as_deref(), &run_id, norm),
-            )?;
-        }
-        Ok(())
-    });
-    if let Err(e) = written {
-        txn.abort();
-        return Err(e);
-    }
-    report.version = txn.commit()?;
+    report.version =
+        ds.begin(meta)?
+            .write_and_commit(TableKind::Scores, Some(&run_id), shard, |w| -> Result<()> {
+                for (id, scores) in &scored {
+                    w.group(
+                        id,
+                        &score_rows(id, scores, table, model_id.as_deref(), &run_id, norm),
+                    )?;
+                }
+                Ok(())
+            })?;
     Ok(report)
 }
 

@@ -147,8 +147,7 @@ pub fn translate(
         // Exporters attach this, so a recording names the nets that made it.
         "model_config": cfg, "decoupled": run.train.decoupled,
     });
-    let mut txn = ds.begin(meta)?;
-    let written = txn.write_groups(
+    report.version = ds.begin(meta)?.write_and_commit(
         TableKind::Imagined,
         Some(model_id),
         ShardOptions::default(),
@@ -173,12 +172,7 @@ pub fn translate(
             }
             Ok(())
         },
-    );
-    if let Err(e) = written {
-        txn.abort();
-        return Err(e);
-    }
-    report.version = txn.commit()?;
+    )?;
     Ok(report)
 }
 

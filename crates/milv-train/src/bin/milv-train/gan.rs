@@ -13,10 +13,10 @@ use milv_train::gan::data::{DataOptions, TrainingSet};
 use milv_train::gan::eval::{EvalSet, evaluate_translation};
 use milv_train::gan::train::{RunOptions, train_cyclegan};
 use milv_train::gan::translate::{LatentDtype, TranslateOptions, translate};
-use milv_train::run::{DataRef, Start};
+use milv_train::run::DataRef;
 use milv_train::{ACycleGan, GanLoss, TrainConfig};
 
-use crate::{Runtime, model_config};
+use crate::{Runtime, model_config, start_run};
 
 #[derive(clap::Args, Debug)]
 pub(crate) struct TrainArgs {
@@ -182,7 +182,8 @@ pub(crate) fn cmd_train_cyclegan(a: TrainArgs) -> anyhow::Result<u8> {
     let dev = a.rt.apply()?;
     let ds = Dataset::open(&a.dataset.root)?;
     let ckpts = a.out.join("checkpoints");
-    let start = Start::resolve(
+    let start = start_run(
+        "milv-train",
         &ds,
         &ckpts,
         a.resume,
@@ -190,12 +191,6 @@ pub(crate) fn cmd_train_cyclegan(a: TrainArgs) -> anyhow::Result<u8> {
         checkpoint::latest,
         |d| Ok(checkpoint::read_meta(d)?.data),
     )?;
-    if start.nothing_to_resume {
-        eprintln!(
-            "milv-train: no checkpoint in {} yet; starting fresh",
-            ckpts.display()
-        );
-    }
     let version = start.version;
     let mut run = match &start.checkpoint {
         Some(dir) => {

@@ -8,7 +8,7 @@ mod meta;
 use clap::{Parser, Subcommand};
 use milv_cli as cli;
 use milv_train::ModelConfig;
-use milv_train::run::device;
+use milv_train::run::{Start, device};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -90,6 +90,27 @@ pub(crate) fn model_config(tiny: bool, size: i64) -> ModelConfig {
             ..ModelConfig::default()
         }
     }
+}
+
+/// Where a training run writing checkpoints to `checkpoints` starts
+/// ([`Start::resolve`]); says so on stderr when `--resume` finds nothing to resume.
+pub(crate) fn start_run(
+    tool: &str,
+    ds: &milv_data::Dataset,
+    checkpoints: &std::path::Path,
+    resume: bool,
+    version: Option<u64>,
+    latest: impl Fn(&std::path::Path) -> milv_train::Result<Option<std::path::PathBuf>>,
+    recorded: impl Fn(&std::path::Path) -> milv_train::Result<milv_train::run::DataRef>,
+) -> anyhow::Result<Start> {
+    let start = Start::resolve(ds, checkpoints, resume, version, latest, recorded)?;
+    if start.nothing_to_resume {
+        eprintln!(
+            "{tool}: no checkpoint in {} yet; starting fresh",
+            checkpoints.display()
+        );
+    }
+    Ok(start)
 }
 
 fn main() -> std::process::ExitCode {

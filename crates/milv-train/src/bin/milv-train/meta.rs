@@ -12,9 +12,9 @@ use milv_train::meta::oneshot::{self, EvalOptions, EvalRecord, Family, PolicyLea
 use milv_train::meta::policy::{Input, MetaConfig, MetaRun, PolicyConfig, Variant};
 use milv_train::meta::tasks::{MetaDataOptions, MetaSet};
 use milv_train::meta::train::{self as meta_train, MetaRunOptions, PolicyMeta, Translator};
-use milv_train::run::{DataRef, Start};
+use milv_train::run::DataRef;
 
-use crate::Runtime;
+use crate::{Runtime, start_run};
 
 #[derive(clap::Args, Debug)]
 pub struct MetaArgs {
@@ -149,7 +149,8 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
     let dev = a.rt.apply()?;
     let ds = Dataset::open(&a.dataset.root)?;
     let ckpts = a.out.join("checkpoints");
-    let start = Start::resolve(
+    let start = start_run(
+        "milv-train meta",
         &ds,
         &ckpts,
         a.resume,
@@ -157,12 +158,6 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
         meta_train::latest,
         |d| Ok(meta_train::read_meta(d)?.1.data),
     )?;
-    if start.nothing_to_resume {
-        eprintln!(
-            "milv-train meta: no checkpoint in {} yet; starting fresh",
-            ckpts.display()
-        );
-    }
     let tr = translator_for(a.variant, a.translator.as_ref())?;
     let version = start.version;
     let image_size = match (&tr, a.size) {
