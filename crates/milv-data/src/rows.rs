@@ -374,21 +374,19 @@ impl FrameRows {
         self.bytes += image.len() + 64;
     }
 
-    pub fn len(&self) -> usize {
-        self.rows
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.rows == 0
-    }
-
     /// Approximate bytes buffered (to decide when to flush).
     pub fn buffered_bytes(&self) -> usize {
         self.bytes
     }
+}
 
+impl RowBuffer for FrameRows {
+    const TABLE: TableKind = TableKind::Frames;
+    fn len(&self) -> usize {
+        self.rows
+    }
     /// Emits the buffered rows and starts over.
-    pub fn finish(&mut self) -> Result<RecordBatch> {
+    fn finish(&mut self) -> Result<RecordBatch> {
         let columns: Vec<ArrayRef> = vec![
             Arc::new(self.episode_id.finish()),
             Arc::new(self.frame_index.finish()),
@@ -400,16 +398,6 @@ impl FrameRows {
         self.rows = 0;
         self.bytes = 0;
         Ok(RecordBatch::try_new(TableKind::Frames.arrow_schema(), columns)?)
-    }
-}
-
-impl RowBuffer for FrameRows {
-    const TABLE: TableKind = TableKind::Frames;
-    fn len(&self) -> usize {
-        self.rows
-    }
-    fn finish(&mut self) -> Result<RecordBatch> {
-        FrameRows::finish(self)
     }
 }
 
@@ -494,17 +482,15 @@ impl ImaginedRows {
         }
         self.rows += 1;
     }
+}
 
-    pub fn len(&self) -> usize {
+impl RowBuffer for ImaginedRows {
+    const TABLE: TableKind = TableKind::Imagined;
+    fn len(&self) -> usize {
         self.rows
     }
-
-    pub fn is_empty(&self) -> bool {
-        self.rows == 0
-    }
-
     /// Emits the buffered rows and starts over.
-    pub fn finish(&mut self) -> Result<RecordBatch> {
+    fn finish(&mut self) -> Result<RecordBatch> {
         let columns: Vec<ArrayRef> = vec![
             Arc::new(self.episode_id.finish()),
             Arc::new(self.frame_index.finish()),
@@ -518,16 +504,6 @@ impl ImaginedRows {
         ];
         self.rows = 0;
         Ok(RecordBatch::try_new(TableKind::Imagined.arrow_schema(), columns)?)
-    }
-}
-
-impl RowBuffer for ImaginedRows {
-    const TABLE: TableKind = TableKind::Imagined;
-    fn len(&self) -> usize {
-        self.rows
-    }
-    fn finish(&mut self) -> Result<RecordBatch> {
-        ImaginedRows::finish(self)
     }
 }
 /// A latent tensor as stored: little-endian values of `dtype` in row-major `shape`.

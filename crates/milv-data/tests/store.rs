@@ -4,6 +4,7 @@
 
 use std::collections::BTreeSet;
 
+use milv_data::RowBuffer as _;
 use milv_data::arrow::array::{Array, Int32Array, StringArray};
 use milv_data::{
     CommitMeta, Dataset, Domain, Episode, FrameEncoding, FrameRows, Kind, ShardOptions, TableKind, ops,

@@ -21,6 +21,7 @@
 //! assert_eq!(commit_episodes(&ds, &[(ep, frames)], CommitMeta::default()).unwrap(), 1);
 //! ```
 
+use milv_data::RowBuffer as _;
 use milv_data::frame_codec::{self, FrameEncoding};
 use milv_data::{
     CommitMeta, Dataset, Domain, Episode, FrameRows, ImaginedRow, ImaginedRows, Kind, Result, ShardOptions,

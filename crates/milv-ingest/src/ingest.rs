@@ -6,6 +6,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::io::Read as _;
 use std::path::{Path, PathBuf};
 
+use milv_data::RowBuffer as _;
 use milv_data::frame_codec::{self, FrameEncoding};
 use milv_data::{
     CommitMeta, Dataset, Domain, Episode, FileAdd, FrameRows, InputDigest, Kind, ShardOptions, ShardWriter,

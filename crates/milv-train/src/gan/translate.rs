@@ -280,7 +280,7 @@ fn translate_clip(
 mod tests {
     use super::*;
     use milv_data::frame_codec::{FrameEncoding, encode};
-    use milv_data::{ImaginedRecord, Row};
+    use milv_data::{ImaginedRecord, Row, RowBuffer as _};
 
     /// The stored actions are π_I's on consecutive translated frames, through the encoder
     /// π_I trained on — for a decoupled model its own, not F's.
