@@ -209,3 +209,114 @@ fn wrong_translators_and_missing_inputs_are_clear_errors() {
     assert_ne!(code, 0);
     assert!(err.contains("unknown variant"), "{err}");
 }
+
+/// DAML's inner-loop flags, the pre-adaptation loss, `eval --split/--demo` and the meta
+/// loss chart, through the real binary.
+#[test]
+fn daml_inner_loop_flags_visibility_and_evaluation_options() {
+    let dir = tempfile::tempdir().unwrap();
+    let fx = common::sim_dataset(dir.path(), 3, true);
+    let ds = s(&fx.root);
+    let runs = [
+        ("daml-defaults", vec![]),
+        (
+            "daml-plain",
+            vec![
+                "--loss-multiplier",
+                "1",
+                "--inner-clip",
+                "0",
+                "--bias-dim",
+                "0",
+                "--no-layer-norm",
+                "--hidden",
+                "5",
+            ],
+        ),
+    ];
+    for (name, flags) in &runs {
+        let out = dir.path().join(name);
+        let mut args = vec!["meta", ds, "--variant", "daml", "--out", s(&out), "--steps", "4"];
+        args.extend(flags.iter().copied());
+        args.extend(TINY);
+        args.push("4");
+        let rep = json(&args);
+        assert!(
+            rep["outer_pre_last"].as_f64().unwrap().is_finite(),
+            "{name}: {rep}"
+        );
+        let ckpt = PathBuf::from(rep["checkpoint"].as_str().unwrap());
+        let meta: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(ckpt.join("policy.json")).unwrap()).unwrap();
+        let p = &meta["policy"];
+        if flags.is_empty() {
+            assert_eq!(
+                (p["loss_multiplier"].as_f64(), p["inner_clip"].as_f64()),
+                (Some(50.0), Some(10.0))
+            );
+            assert_eq!(p["layer_norm"], true);
+            assert!(p["bias_dim"].as_i64().unwrap() > 0);
+        } else {
+            assert_eq!(
+                (p["loss_multiplier"].as_f64(), p["inner_clip"].as_f64()),
+                (Some(1.0), Some(0.0))
+            );
+            assert_eq!((p["bias_dim"].as_i64(), p["hidden"].as_i64()), (Some(0), Some(5)));
+            assert_eq!(p["layer_norm"], false);
+        }
+        // Every step logs the outer loss after and before adaptation.
+        let losses = std::fs::read_to_string(out.join("losses.jsonl")).unwrap();
+        for line in losses.lines() {
+            let v: serde_json::Value = serde_json::from_str(line).unwrap();
+            assert!(
+                v["outer"].as_f64().unwrap() >= 0.0 && v["outer_pre"].as_f64().unwrap() > 0.0,
+                "{v}"
+            );
+        }
+    }
+    let out = dir.path().join("daml-defaults");
+    for (split, demo, tasks) in [("train", "own", 11), ("test", "swap", 12)] {
+        let ev = json(&[
+            "eval",
+            s(&out),
+            "--trials",
+            "1",
+            "--split",
+            split,
+            "--demo",
+            demo,
+            "--threads",
+            "1",
+            "--json",
+        ]);
+        assert_eq!(
+            (ev["split"].as_str(), ev["demo"].as_str()),
+            (Some(split), Some(demo))
+        );
+        assert_eq!(ev["per_task"].as_array().unwrap().len(), tasks, "{split}");
+    }
+    let charts = dir.path().join("charts");
+    let (code, stdout, err) = run(&[
+        "report",
+        s(&out),
+        s(&dir.path().join("daml-plain")),
+        "-o",
+        s(&charts),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(stdout.contains("meta_losses.png"), "{stdout}");
+    assert!(std::fs::metadata(charts.join("meta_losses.png")).unwrap().len() > 1000);
+    let (code, _, err) = run(&[
+        "meta",
+        ds,
+        "--variant",
+        "daml",
+        "--out",
+        s(&dir.path().join("bad")),
+        "--loss-multiplier",
+        "0",
+        "--tiny",
+    ]);
+    assert_eq!(code, 1);
+    assert!(err.contains("--loss-multiplier must be positive"), "{err}");
+}

@@ -22,7 +22,7 @@ use milv_sim::Vec2;
 use milv_sim::env::{Sim, Task, expert_action, pushing_task, rollout, swap_distractor};
 use milv_sim::push::object_catalog;
 use milv_sim::render::Domain;
-use milv_sim::shapes::test_shapes;
+use milv_sim::shapes::{Shape, test_shapes, training_shapes};
 
 use crate::gan::cyclegan::Nets;
 use crate::meta::policy::{Input, PolicyNet, Variant};
@@ -81,24 +81,100 @@ impl Family {
 
     /// Names of the held-out tasks.
     pub fn tasks(self) -> Vec<String> {
+        self.tasks_of(EvalSplit::Test)
+    }
+
+    /// Names of the tasks of `split`: the training shapes / objects, or the held-out ones.
+    pub fn tasks_of(self, split: EvalSplit) -> Vec<String> {
         match self {
-            Family::Drawing => test_shapes().into_iter().map(|s| s.name).collect(),
-            Family::Pushing => object_catalog().1.into_iter().map(|o| o.name).collect(),
+            Family::Drawing => shapes_of(split).into_iter().map(|s| s.name).collect(),
+            Family::Pushing => objects_of(split).into_iter().map(|o| o.name).collect(),
         }
+    }
+}
+
+/// Which tasks a policy is evaluated on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EvalSplit {
+    /// Training shapes / objects at new positions: does the policy fit what it saw?
+    Train,
+    /// Held-out shapes / objects: does it generalise (the paper's protocol)?
+    #[default]
+    Test,
+}
+
+impl std::str::FromStr for EvalSplit {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "train" => Ok(EvalSplit::Train),
+            "test" => Ok(EvalSplit::Test),
+            _ => Err(format!("unknown split {s:?} (train | test)")),
+        }
+    }
+}
+
+/// Which demonstration the learner adapts on.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DemoSource {
+    /// A demo of the task executed (the protocol).
+    #[default]
+    Own,
+    /// A demo of the next task of the split: the drop in success against `own` measures
+    /// how much the policy uses the demonstration at all.
+    Swap,
+}
+
+impl std::str::FromStr for DemoSource {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "own" => Ok(DemoSource::Own),
+            "swap" => Ok(DemoSource::Swap),
+            _ => Err(format!("unknown demo source {s:?} (own | swap)")),
+        }
+    }
+}
+
+fn shapes_of(split: EvalSplit) -> Vec<Shape> {
+    match split {
+        EvalSplit::Train => training_shapes(),
+        EvalSplit::Test => test_shapes(),
+    }
+}
+
+fn objects_of(split: EvalSplit) -> Vec<milv_sim::push::ObjSpec> {
+    let (train, test) = object_catalog();
+    match split {
+        EvalSplit::Train => train,
+        EvalSplit::Test => test,
     }
 }
 
 /// The demonstration and execution instances of trial `trial` of held-out task `task`.
 pub fn trial_tasks(family: Family, task: usize, seed: u64, trial: usize) -> Result<(Task, Task)> {
+    trial_tasks_of(family, EvalSplit::Test, task, seed, trial)
+}
+
+/// [`trial_tasks`] for task `task` of `split`.
+pub fn trial_tasks_of(
+    family: Family,
+    split: EvalSplit,
+    task: usize,
+    seed: u64,
+    trial: usize,
+) -> Result<(Task, Task)> {
     let mut rng = StdRng::seed_from_u64(
         seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ ((task as u64) << 32) ^ trial as u64,
     );
     match family {
         Family::Drawing => {
-            let mut shape = test_shapes()
+            let mut shape = shapes_of(split)
                 .get(task)
                 .cloned()
-                .ok_or_else(|| Error::Config(format!("no test shape {task}")))?;
+                .ok_or_else(|| Error::Config(format!("no shape {task}")))?;
             let off = Vec2::new(rng.random_range(-6.0..6.0), rng.random_range(-6.0..6.0));
             for p in &mut shape.path {
                 *p += off;
@@ -107,11 +183,11 @@ pub fn trial_tasks(family: Family, task: usize, seed: u64, trial: usize) -> Resu
             Ok((t.clone(), t))
         }
         Family::Pushing => {
-            let objs = object_catalog().1;
+            let objs = objects_of(split);
             let want = objs
                 .get(task)
                 .map(|o| o.name.clone())
-                .ok_or_else(|| Error::Config(format!("no test object {task}")))?;
+                .ok_or_else(|| Error::Config(format!("no object {task}")))?;
             for _ in 0..10_000 {
                 let Some(t) = pushing_task(&objs, &mut rng) else {
                     break;
@@ -139,6 +215,8 @@ pub struct EvalOptions {
     pub seeds: Vec<u64>,
     /// Camera frame size.
     pub image_size: u32,
+    pub split: EvalSplit,
+    pub demo: DemoSource,
 }
 
 /// Outcomes of one held-out task.
@@ -166,6 +244,12 @@ pub struct FamilyResult {
     pub control: usize,
     pub seeds: Vec<u64>,
     pub trials_per_task: usize,
+    /// The tasks evaluated on (reports from before it existed: `test`).
+    #[serde(default)]
+    pub split: EvalSplit,
+    /// The demonstrations adapted on.
+    #[serde(default)]
+    pub demo: DemoSource,
     pub per_task: Vec<TaskOutcome>,
 }
 
@@ -191,7 +275,7 @@ pub fn evaluate_one_shot(
     opts: &EvalOptions,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<FamilyResult> {
-    let names = opts.family.tasks();
+    let names = opts.family.tasks_of(opts.split);
     let total = names.len() * opts.seeds.len() * opts.trials;
     let mut done = 0;
     let mut per_task = Vec::with_capacity(names.len());
@@ -202,7 +286,13 @@ pub fn evaluate_one_shot(
         };
         for &seed in &opts.seeds {
             for trial in 0..opts.trials {
-                let (demo_task, exec_task) = trial_tasks(opts.family, k, seed, trial)?;
+                let (own_demo, exec_task) = trial_tasks_of(opts.family, opts.split, k, seed, trial)?;
+                let demo_task = match opts.demo {
+                    DemoSource::Own => own_demo,
+                    DemoSource::Swap => {
+                        trial_tasks_of(opts.family, opts.split, (k + 1) % names.len(), seed, trial)?.0
+                    }
+                };
                 let empty = || Error::Config(format!("task {name}: empty instance"));
                 let demo = rollout(
                     Sim::reset(demo_task, Domain::Human, opts.image_size).ok_or_else(empty)?,
@@ -241,6 +331,8 @@ pub fn evaluate_one_shot(
         control: sum(|t| t.control),
         seeds: opts.seeds.clone(),
         trials_per_task: opts.trials * opts.seeds.len(),
+        split: opts.split,
+        demo: opts.demo,
         per_task,
     })
 }
@@ -379,7 +471,20 @@ pub fn tables_markdown(records: &[EvalRecord]) -> String {
     s += &"---|".repeat(fams.len());
     s += "\n";
     for v in &present {
-        s += &format!("| {} |", v.label());
+        // Rows are the paper's protocol (held-out tasks, own demos) unless a record says
+        // otherwise.
+        let note = records
+            .iter()
+            .filter(|r| r.variant == *v)
+            .map(|r| match (r.result.split, r.result.demo) {
+                (EvalSplit::Test, DemoSource::Own) => "",
+                (EvalSplit::Train, DemoSource::Own) => " (training tasks)",
+                (EvalSplit::Test, DemoSource::Swap) => " (swapped demos)",
+                (EvalSplit::Train, DemoSource::Swap) => " (training tasks, swapped demos)",
+            })
+            .next()
+            .unwrap_or("");
+        s += &format!("| {}{note} |", v.label());
         for f in &fams {
             s += &match find(*v, *f) {
                 Some(r) => {
@@ -473,6 +578,8 @@ mod tests {
                 trials: 2,
                 seeds: vec![3],
                 image_size: 32,
+                split: EvalSplit::Test,
+                demo: DemoSource::Own,
             };
             let got = evaluate_one_shot(&mut Oracle, &opts, &mut |_, _| {}).unwrap();
             let mut expert = 0;
@@ -517,5 +624,53 @@ mod tests {
             assert_eq!(a.name, b.name);
             assert_ne!(d1.name, d2.name);
         }
+    }
+
+    /// Records the demonstrations it is shown; acts like the expert.
+    #[derive(Default)]
+    struct Recorder(Vec<Vec<u8>>);
+
+    impl OneShot for Recorder {
+        fn adapt(&mut self, demo: &[Vec<u8>]) -> Result<()> {
+            self.0.push(demo.last().cloned().unwrap_or_default());
+            Ok(())
+        }
+        fn act(&mut self, sim: &Sim, _frame: &[u8]) -> Result<Vec2> {
+            Ok(expert_action(sim))
+        }
+    }
+
+    /// `--demo swap` shows each trial the demo the next task's trial gets; `--split
+    /// train` runs the training shapes.
+    #[test]
+    fn demo_swap_adapts_on_another_task_s_demo_and_splits_pick_their_tasks() {
+        let run = |split, demo| {
+            let mut r = Recorder::default();
+            let opts = EvalOptions {
+                family: Family::Drawing,
+                trials: 1,
+                seeds: vec![2],
+                image_size: 32,
+                split,
+                demo,
+            };
+            let res = evaluate_one_shot(&mut r, &opts, &mut |_, _| {}).unwrap();
+            (r.0, res)
+        };
+        let (own, res) = run(EvalSplit::Test, DemoSource::Own);
+        let (swapped, res_swap) = run(EvalSplit::Test, DemoSource::Swap);
+        let n = own.len();
+        assert_eq!(n, Family::Drawing.tasks().len());
+        for k in 0..n {
+            assert_ne!(swapped[k], own[k], "task {k} adapted on its own demo");
+            assert_eq!(swapped[k], own[(k + 1) % n]);
+        }
+        // The expert ignores the demo: the swap changes nothing for it.
+        assert_eq!(res.successes, res_swap.successes);
+        assert_eq!(res_swap.demo, DemoSource::Swap);
+        let (train, res) = run(EvalSplit::Train, DemoSource::Own);
+        assert_eq!(train.len(), Family::Drawing.tasks_of(EvalSplit::Train).len());
+        assert_eq!(res.split, EvalSplit::Train);
+        assert_eq!(res.per_task[0].task, training_shapes()[0].name);
     }
 }

@@ -8,11 +8,17 @@
 //! learned adaptation loss's weights ψ receive a gradient).
 //!
 //! Layout of θ: the convolutions (16 filters of 5×5; latents: two strided and one not;
-//! images: three strided and three not), spatial softmax, three fully connected layers
-//! of 100 units, then two heads: the **pre-update head** (a linear map to
-//! [`PolicyConfig::pre_dim`] features per frame, read only by L_ψ) and the
-//! **post-update head** (the action). ψ: three temporal convolutions over the sequence of
-//! pre-update features (10×1, 10×1, 1×1); L_ψ is the mean of their squared output.
+//! images: three strided and three not), each followed by layer norm with a learned
+//! per-channel offset, spatial softmax, a learned context vector concatenated to its
+//! output (DAML's *bias transformation*), three fully connected layers of 100 units, then
+//! two heads: the **pre-update head** (a linear map to [`PolicyConfig::pre_dim`] features
+//! per frame, read only by L_ψ) and the **post-update head** (the action). ψ: three
+//! temporal convolutions over the sequence of pre-update features (10×1, 10×1, 1×1).
+//!
+//! The inner step follows DAML's reference code (`tianheyu927/mil`) where the paper is
+//! silent: L_ψ is `mean((m · out)²)` with the loss multiplier `m` inside the square (50),
+//! each inner gradient entry is clipped to ±10, the context vector is adapted with the
+//! rest of θ, and the layer-norm offsets are outer parameters only (not adapted).
 
 use serde::{Deserialize, Serialize};
 use tch::nn::{self, Init};
@@ -134,6 +140,28 @@ pub struct PolicyConfig {
     pub action_dim: i64,
     /// Actions are learned divided by this (cm), so targets are of order 1.
     pub action_scale: f64,
+    /// L_ψ = mean((m · out)²): DAML's loss multiplier, inside the square. (Checkpoints
+    /// from before it existed trained with 1.)
+    #[serde(default = "one")]
+    pub loss_multiplier: f64,
+    /// Inner gradients are clipped elementwise to ±this; 0: no clipping.
+    #[serde(default)]
+    pub inner_clip: f64,
+    /// Width of the learned context vector after the spatial softmax (DAML's bias
+    /// transformation); 0: none.
+    #[serde(default)]
+    pub bias_dim: i64,
+    /// Layer norm (learned per-channel offset, no scale) after each convolution.
+    #[serde(default)]
+    pub layer_norm: bool,
+    /// Width of the robot state appended after the spatial softmax; 0: image-only (the
+    /// paper's policy).
+    #[serde(default)]
+    pub state_dim: i64,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 impl PolicyConfig {
@@ -155,6 +183,11 @@ impl PolicyConfig {
             tconv_kernels: [10, 10, 1],
             action_dim,
             action_scale: 5.0,
+            loss_multiplier: 50.0,
+            inner_clip: 10.0,
+            bias_dim: 20,
+            layer_norm: true,
+            state_dim: 0,
         }
     }
 
@@ -168,6 +201,7 @@ impl PolicyConfig {
             pre_dim: 4,
             tconv_filters: 6,
             tconv_kernels: [3, 3, 1],
+            bias_dim: 3,
             ..PolicyConfig::paper(input, input_shape, action_dim)
         }
     }
@@ -186,6 +220,20 @@ impl PolicyConfig {
             return Err(Error::Config(
                 "the policy needs at least one convolution, one hidden layer and a non-empty input".into(),
             ));
+        }
+        let positive = self.loss_multiplier > 0.0 && self.loss_multiplier.is_finite();
+        let clip_ok = self.inner_clip >= 0.0 && self.inner_clip.is_finite();
+        if !positive
+            || !clip_ok
+            || self.bias_dim < 0
+            || self.state_dim < 0
+            || self.hidden < 1
+        {
+            return Err(Error::Config(format!(
+                "--loss-multiplier must be positive, --inner-clip, --bias-dim and the state width \
+                 non-negative, --hidden positive (got {}, {}, {}, {}, {})",
+                self.loss_multiplier, self.inner_clip, self.bias_dim, self.state_dim, self.hidden
+            )));
         }
         Ok(())
     }
@@ -222,14 +270,18 @@ impl Default for MetaConfig {
     }
 }
 
-/// The meta-policy: θ and ψ in one VarStore.
+/// The meta-policy: θ, ψ and the layer-norm offsets in one VarStore.
 pub struct PolicyNet {
     pub cfg: PolicyConfig,
     pub vs: nn::VarStore,
-    /// θ, in layer order (weight, bias per layer); the post-update head is the last pair.
+    /// θ, in layer order: (weight, bias) per convolution, the context vector (if
+    /// `bias_dim` > 0), (weight, bias) per fully connected layer and head; the post-update
+    /// head is the last pair.
     pub theta: Vec<Tensor>,
     /// ψ: the temporal convolutions (weight, bias each).
     pub psi: Vec<Tensor>,
+    /// Layer-norm offsets, one `[filters]` per convolution (outer parameters only).
+    pub norm: Vec<Tensor>,
 }
 
 /// Variable `layer.name` (tch joins path segments with dots).
@@ -259,7 +311,18 @@ impl PolicyNet {
             theta.push(var(&root, &format!("conv{i}.bias"), &[f], fan));
             c_in = f;
         }
-        let mut d_in = 2 * f;
+        let norm = if cfg.layer_norm {
+            (0..cfg.strides.len())
+                .map(|i| root.var(&format!("norm{i}_offset"), &[f], Init::Const(0.0)))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        if cfg.bias_dim > 0 {
+            // Zero at the start, as in DAML: the context is what adaptation writes into.
+            theta.push(root.var("context", &[cfg.bias_dim], Init::Const(0.0)));
+        }
+        let mut d_in = 2 * f + cfg.bias_dim + cfg.state_dim;
         for i in 0..cfg.fc_layers {
             theta.push(var(&root, &format!("fc{i}.weight"), &[cfg.hidden, d_in], d_in));
             theta.push(var(&root, &format!("fc{i}.bias"), &[cfg.hidden], d_in));
@@ -279,7 +342,13 @@ impl PolicyNet {
             psi.push(var(&root, &format!("loss.t{i}.weight"), &[co, ci, kk], ci * kk));
             psi.push(var(&root, &format!("loss.t{i}.bias"), &[co], ci * kk));
         }
-        Ok(PolicyNet { cfg, vs, theta, psi })
+        Ok(PolicyNet {
+            cfg,
+            vs,
+            theta,
+            psi,
+            norm,
+        })
     }
 
     /// The θ that the inner step updates (all but the post-update head, which L_ψ does
@@ -288,16 +357,34 @@ impl PolicyNet {
         self.theta.len() - 2
     }
 
-    fn trunk(&self, th: &[Tensor], x: &Tensor) -> Tensor {
+    /// The hidden features `[T, hidden]` of a sequence; `state` `[T, state_dim]` is
+    /// appended after the spatial softmax when the policy takes one (zeros if `None`).
+    fn trunk(&self, th: &[Tensor], x: &Tensor, state: Option<&Tensor>) -> Tensor {
         let pad = self.cfg.kernel / 2;
         let mut h = x.shallow_clone();
         for (i, &s) in self.cfg.strides.iter().enumerate() {
-            h = h
-                .conv2d(&th[2 * i], Some(&th[2 * i + 1]), [s, s], [pad, pad], [1, 1], 1)
-                .relu();
+            h = h.conv2d(&th[2 * i], Some(&th[2 * i + 1]), [s, s], [pad, pad], [1, 1], 1);
+            if let Some(offset) = self.norm.get(i) {
+                let shape = h.size();
+                h = h.layer_norm(&shape[1..], None::<Tensor>, None::<Tensor>, 1e-5, false)
+                    + offset.view([1, -1, 1, 1]);
+            }
+            h = h.relu();
         }
         let mut h = spatial_softmax(&h);
-        let base = 2 * self.cfg.strides.len();
+        let mut base = 2 * self.cfg.strides.len();
+        let t = h.size()[0];
+        if self.cfg.bias_dim > 0 {
+            h = Tensor::cat(&[h, th[base].unsqueeze(0).expand([t, -1], false)], 1);
+            base += 1;
+        }
+        if self.cfg.state_dim > 0 {
+            let s = match state {
+                Some(s) => s.shallow_clone(),
+                None => Tensor::zeros([t, self.cfg.state_dim], (x.kind(), x.device())),
+            };
+            h = Tensor::cat(&[h, s], 1);
+        }
         for j in 0..self.cfg.fc_layers {
             h = h.linear(&th[base + 2 * j], Some(&th[base + 2 * j + 1])).relu();
         }
@@ -309,18 +396,25 @@ impl PolicyNet {
         h.linear(&th[n - from_end], Some(&th[n - from_end + 1]))
     }
 
-    /// Pre-update features `[T, pre_dim]` of a sequence `[T, C, H, W]`.
+    /// Pre-update features `[T, pre_dim]` of a sequence `[T, C, H, W]` (the inner
+    /// sequence: a video, so no state).
     pub fn pre(&self, th: &[Tensor], x: &Tensor) -> Tensor {
-        PolicyNet::head(th, &self.trunk(th, x), 4)
+        PolicyNet::head(th, &self.trunk(th, x, None), 4)
     }
 
     /// Actions `[T, action_dim]` in units of `action_scale`.
     pub fn act(&self, th: &[Tensor], x: &Tensor) -> Tensor {
-        PolicyNet::head(th, &self.trunk(th, x), 2)
+        self.act_with(th, x, None)
+    }
+
+    /// [`PolicyNet::act`] with the robot's state, for a policy that takes one.
+    pub fn act_with(&self, th: &[Tensor], x: &Tensor, state: Option<&Tensor>) -> Tensor {
+        PolicyNet::head(th, &self.trunk(th, x, state), 2)
     }
 
     /// L_ψ(θ, d): temporal convolutions over the pre-update features of one sequence,
-    /// squared and averaged.
+    /// multiplied by the loss multiplier, squared and averaged (DAML's
+    /// `euclidean_loss_layer` against a zero target).
     pub fn adaptation_loss(&self, th: &[Tensor], psi: &[Tensor], x: &Tensor) -> Tensor {
         let mut h = self.pre(th, x).transpose(0, 1).unsqueeze(0);
         for i in 0..3 {
@@ -329,11 +423,13 @@ impl PolicyNet {
                 h = h.relu();
             }
         }
-        h.square().mean(h.kind())
+        let kind = h.kind();
+        (h * self.cfg.loss_multiplier).square().mean(kind)
     }
 
-    /// θ' = θ − α ∇_θ L_ψ(θ, x). With `create_graph` the result stays differentiable in
-    /// θ and ψ through the gradient (second order); without, the gradient is a constant.
+    /// θ' = θ − α clip(∇_θ L_ψ(θ, x)), the gradient clipped elementwise to ±`inner_clip`
+    /// (when set). With `create_graph` the result stays differentiable in θ and ψ through
+    /// the gradient (second order); without, the gradient is a constant.
     pub fn adapt(
         &self,
         th: &[Tensor],
@@ -345,7 +441,19 @@ impl PolicyNet {
         let loss = self.adaptation_loss(th, psi, x);
         let k = th.len() - 2;
         let grads = Tensor::run_backward(&[&loss], &th[..k], true, create_graph);
-        let mut out: Vec<Tensor> = th[..k].iter().zip(&grads).map(|(t, g)| t - g * alpha).collect();
+        let clip = self.cfg.inner_clip;
+        let mut out: Vec<Tensor> = th[..k]
+            .iter()
+            .zip(&grads)
+            .map(|(t, g)| {
+                let g = if clip > 0.0 {
+                    g.clamp(-clip, clip)
+                } else {
+                    g.shallow_clone()
+                };
+                t - g * alpha
+            })
+            .collect();
         out.extend(th[k..].iter().map(Tensor::shallow_clone));
         (out, loss)
     }
@@ -354,7 +462,21 @@ impl PolicyNet {
     /// weights are not normalised, so a frame's share of the gradient is proportional to
     /// its weight.
     pub fn bc_loss(&self, th: &[Tensor], x: &Tensor, actions: &Tensor, weights: &Tensor) -> Tensor {
-        let err = (self.act(th, x) - actions).square().mean_dim(1, false, x.kind());
+        self.bc_loss_with(th, x, None, actions, weights)
+    }
+
+    /// [`PolicyNet::bc_loss`] with the robot's state, for a policy that takes one.
+    pub fn bc_loss_with(
+        &self,
+        th: &[Tensor],
+        x: &Tensor,
+        state: Option<&Tensor>,
+        actions: &Tensor,
+        weights: &Tensor,
+    ) -> Tensor {
+        let err = (self.act_with(th, x, state) - actions)
+            .square()
+            .mean_dim(1, false, x.kind());
         (err * weights).mean(x.kind())
     }
 
@@ -368,31 +490,46 @@ impl PolicyNet {
 }
 
 /// One task of a meta-batch: the inner sequence (no actions) and the outer sequence with
-/// its target actions (scaled) and per-frame weights.
+/// its target actions (scaled), per-frame weights and, for a policy that takes one, the
+/// robot's state along it.
 pub struct MetaTask {
     pub inner: Tensor,
     pub outer: Tensor,
     pub actions: Tensor,
     pub weights: Tensor,
+    pub outer_state: Option<Tensor>,
 }
 
-/// Mean inner and outer loss of one meta-step.
+/// Mean losses of one meta-step.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct MetaLosses {
     /// L_ψ before adaptation.
     pub inner: f64,
-    /// Weighted behaviour cloning after adaptation.
+    /// Weighted behaviour cloning after adaptation (at θ′): what the meta-step minimises.
     pub outer: f64,
+    /// The same loss before adaptation (at θ): when it equals `outer`, the inner step
+    /// does nothing.
+    #[serde(default)]
+    pub outer_pre: f64,
 }
 
-/// The meta-objective (eq. 6 / 11) averaged over `tasks`, as a differentiable scalar.
-pub fn meta_objective(net: &PolicyNet, tasks: &[MetaTask], alpha: f64, second_order: bool) -> (Tensor, f64) {
+/// The meta-objective (eq. 6 / 11) averaged over `tasks`, as a differentiable scalar,
+/// with the mean L_ψ and the mean outer loss before adaptation.
+pub fn meta_objective(
+    net: &PolicyNet,
+    tasks: &[MetaTask],
+    alpha: f64,
+    second_order: bool,
+) -> (Tensor, f64, f64) {
     let mut total: Option<Tensor> = None;
-    let mut inner = 0.0;
+    let (mut inner, mut pre) = (0.0, 0.0);
     for t in tasks {
         let (adapted, li) = net.adapt(&net.theta, &net.psi, &t.inner, alpha, second_order);
         inner += li.double_value(&[]);
-        let lo = net.bc_loss(&adapted, &t.outer, &t.actions, &t.weights);
+        let state = t.outer_state.as_ref();
+        pre += tch::no_grad(|| net.bc_loss_with(&net.theta, &t.outer, state, &t.actions, &t.weights))
+            .double_value(&[]);
+        let lo = net.bc_loss_with(&adapted, &t.outer, state, &t.actions, &t.weights);
         total = Some(match total {
             Some(s) => s + lo,
             None => lo,
@@ -400,7 +537,7 @@ pub fn meta_objective(net: &PolicyNet, tasks: &[MetaTask], alpha: f64, second_or
     }
     let n = tasks.len().max(1) as f64;
     let total = total.unwrap_or_else(|| Tensor::zeros([], (Kind::Float, net.vs.device())));
-    (total / n, inner / n)
+    (total / n, inner / n, pre / n)
 }
 
 /// A meta-training run: the policy, its optimiser and the step count.
@@ -432,12 +569,17 @@ impl MetaRun {
     /// One outer Adam step on a meta-batch.
     pub fn step(&mut self, tasks: &[MetaTask]) -> MetaLosses {
         self.adam.zero_grad();
-        let (loss, inner) = meta_objective(&self.net, tasks, self.cfg.alpha, self.cfg.second_order);
+        let (loss, inner, outer_pre) =
+            meta_objective(&self.net, tasks, self.cfg.alpha, self.cfg.second_order);
         let outer = loss.double_value(&[]);
         loss.backward();
         self.adam.step();
         self.step += 1;
-        MetaLosses { inner, outer }
+        MetaLosses {
+            inner,
+            outer,
+            outer_pre,
+        }
     }
 }
 
@@ -462,6 +604,7 @@ mod tests {
             outer: Tensor::randn([t, 2, 6, 6], o),
             actions: Tensor::randn([t, 2], o),
             weights: Tensor::rand([t], o) + 0.5,
+            outer_state: None,
         }
     }
 
@@ -476,12 +619,13 @@ mod tests {
         let _serial = crate::testing::torch_rng();
         let net = tiny_net(Kind::Double);
         let tasks = [task(Kind::Double, 9, 1), task(Kind::Double, 9, 2)];
-        let (loss, _) = meta_objective(&net, &tasks, 0.3, true);
+        let (loss, _, _) = meta_objective(&net, &tasks, 0.3, true);
         loss.backward();
         let params: Vec<Tensor> = net
             .theta
             .iter()
             .chain(&net.psi)
+            .chain(&net.norm)
             .map(Tensor::shallow_clone)
             .collect();
         let mut checked = 0;
@@ -527,7 +671,7 @@ mod tests {
         let tasks = [task(Kind::Float, 12, 3)];
         for second in [true, false] {
             let net = tiny_net(Kind::Float);
-            let (loss, _) = meta_objective(&net, &tasks, 0.1, second);
+            let (loss, _, _) = meta_objective(&net, &tasks, 0.1, second);
             loss.backward();
             let norm: f64 = net
                 .psi
@@ -563,8 +707,9 @@ mod tests {
                 outer: base.outer.shallow_clone(),
                 actions: base.actions.shallow_clone(),
                 weights: w.shallow_clone(),
+                outer_state: None,
             };
-            let (loss, _) = meta_objective(&net, &[t], 0.2, true);
+            let (loss, _, _) = meta_objective(&net, &[t], 0.2, true);
             loss.backward();
             Tensor::cat(
                 &net.theta
@@ -613,9 +758,88 @@ mod tests {
         assert!(last < first / 2.0, "outer loss {first} → {last}");
     }
 
+    /// DAML's additions get gradients and do what they claim: the context vector and the
+    /// layer-norm offsets receive meta-gradients, the context is adapted and the offsets
+    /// are not, the multiplier scales L_ψ by its square, and no inner gradient entry moves
+    /// θ by more than α · clip.
+    #[test]
+    fn bias_transformation_layer_norm_multiplier_and_clip_work_as_in_daml() {
+        let _serial = crate::testing::torch_rng();
+        let net = tiny_net(Kind::Float);
+        let ctx = 2 * net.cfg.strides.len();
+        assert_eq!(net.theta[ctx].size(), [net.cfg.bias_dim]);
+        assert_eq!(net.norm.len(), net.cfg.strides.len());
+        let tasks = [task(Kind::Float, 9, 7)];
+        let (loss, _, _) = meta_objective(&net, &tasks, 0.1, true);
+        loss.backward();
+        let grad = |t: &Tensor| t.grad().abs().sum(Kind::Double).double_value(&[]);
+        assert!(grad(&net.theta[ctx]) > 0.0, "the context vector got no gradient");
+        assert!(
+            net.norm.iter().all(|o| grad(o) > 0.0),
+            "a layer-norm offset got no gradient"
+        );
+        let (alpha, clip) = (0.1, net.cfg.inner_clip);
+        let (adapted, _) = net.adapt(&net.theta, &net.psi, &tasks[0].inner, alpha, false);
+        let moved = |i: usize| (&adapted[i] - &net.theta[i]).abs().max().double_value(&[]);
+        assert!(moved(ctx) > 0.0, "the context vector was not adapted");
+        let max_move = (0..net.inner_len()).map(moved).fold(0.0, f64::max);
+        assert!(max_move <= alpha * clip * (1.0 + 1e-6), "{max_move}");
+        let mut unit = PolicyNet::new(
+            PolicyConfig {
+                loss_multiplier: 1.0,
+                ..net.cfg.clone()
+            },
+            Device::Cpu,
+        )
+        .unwrap();
+        tch::no_grad(|| {
+            for (a, b) in unit
+                .theta
+                .iter_mut()
+                .chain(&mut unit.psi)
+                .zip(net.theta.iter().chain(&net.psi))
+            {
+                a.copy_(b);
+            }
+        });
+        let l1 = unit
+            .adaptation_loss(&unit.theta, &unit.psi, &tasks[0].inner)
+            .double_value(&[]);
+        let lm = net
+            .adaptation_loss(&net.theta, &net.psi, &tasks[0].inner)
+            .double_value(&[]);
+        let m = net.cfg.loss_multiplier;
+        assert!((lm - m * m * l1).abs() <= 1e-4 * lm.abs(), "{lm} vs {m}² × {l1}");
+    }
+
+    /// The logged loss before adaptation is the outer loss at θ; with α = 0 it equals the
+    /// one after.
+    #[test]
+    fn the_pre_adaptation_loss_is_the_loss_at_theta() {
+        let _serial = crate::testing::torch_rng();
+        let net = tiny_net(Kind::Double);
+        let tasks = [task(Kind::Double, 9, 8), task(Kind::Double, 9, 9)];
+        let (post, _, pre) = meta_objective(&net, &tasks, 0.3, true);
+        let at_theta: f64 = tasks
+            .iter()
+            .map(|t| {
+                net.bc_loss(&net.theta, &t.outer, &t.actions, &t.weights)
+                    .double_value(&[])
+            })
+            .sum::<f64>()
+            / 2.0;
+        assert!((pre - at_theta).abs() < 1e-12, "{pre} vs {at_theta}");
+        assert!(
+            (post.double_value(&[]) - pre).abs() > 1e-9,
+            "the inner step changed nothing"
+        );
+        let (post0, _, pre0) = meta_objective(&net, &tasks, 0.0, true);
+        assert!((post0.double_value(&[]) - pre0).abs() < 1e-12);
+    }
+
     impl PolicyNet {
         fn adam_free_zero_grad(&self) {
-            for p in self.theta.iter().chain(&self.psi) {
+            for p in self.theta.iter().chain(&self.psi).chain(&self.norm) {
                 let mut g = p.grad();
                 if g.defined() {
                     let _ = g.detach_().zero_();

@@ -386,6 +386,7 @@ impl MetaSet {
                 outer: so.frames.to_device(device),
                 actions: acts.to_device(device),
                 weights: so.weights.to_device(device),
+                outer_state: None,
             });
         }
         out

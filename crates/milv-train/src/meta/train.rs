@@ -132,6 +132,9 @@ pub struct MetaReport {
     /// Mean outer loss over the first and the last tenth of the steps run.
     pub outer_first: f64,
     pub outer_last: f64,
+    /// The outer loss before adaptation (at θ) over the last tenth: near `outer_last`
+    /// means the inner step does little.
+    pub outer_pre_last: f64,
     pub checkpoint: Option<PathBuf>,
 }
 
@@ -157,8 +160,10 @@ pub fn train_meta(
         mean_step_ms: 0.0,
         outer_first: f64::NAN,
         outer_last: f64::NAN,
+        outer_pre_last: f64::NAN,
         checkpoint: None,
     };
+    let mut pres = Vec::new();
     while run.step < run.cfg.steps {
         let tasks = set.sample(run.cfg.seed, run.step, run.cfg.meta_batch, scale, device);
         let t = Instant::now();
@@ -172,6 +177,7 @@ pub fn train_meta(
         }
         total_ms += step_ms;
         outers.push(losses.outer);
+        pres.push(losses.outer_pre);
         report.steps_run += 1;
         let line = MetaStepLog {
             step: run.step,
@@ -191,6 +197,7 @@ pub fn train_meta(
     if !outers.is_empty() {
         report.outer_first = mean(&outers[..tenth]);
         report.outer_last = mean(&outers[outers.len() - tenth..]);
+        report.outer_pre_last = mean(&pres[pres.len() - tenth..]);
     }
     report.step = run.step;
     report.mean_step_ms = total_ms / report.steps_run.max(1) as f64;
@@ -236,6 +243,7 @@ pub fn bench_meta(
             outer: Tensor::randn([frames, c, h, w], o),
             actions: Tensor::randn([frames, 2], o),
             weights: Tensor::rand([frames], o),
+            outer_state: None,
         })
         .collect();
     let t = crate::run::time_steps(warmup, steps, &mut || {
@@ -254,6 +262,72 @@ pub fn bench_meta(
     })
 }
 
+/// Outer loss after adaptation (θ′) and before (θ) of meta runs (their `losses.jsonl`),
+/// as one PNG chart `meta_losses.png` in `out`, each a moving average over `window`
+/// steps: where the two curves lie on each other, the inner step does nothing.
+pub fn plot_meta_runs(runs: &[PathBuf], out: &Path, window: usize) -> Result<PathBuf> {
+    std::fs::create_dir_all(out).map_err(Error::io("create folder", out))?;
+    let mut series = Vec::new();
+    for r in runs {
+        let path = r.join("losses.jsonl");
+        let text = std::fs::read_to_string(&path).map_err(Error::io("read", &path))?;
+        let name = r
+            .file_name()
+            .map_or_else(|| r.display().to_string(), |n| n.to_string_lossy().into_owned());
+        let (mut post, mut pre) = (Vec::new(), Vec::new());
+        for line in text.lines().filter(|l| !l.trim().is_empty()) {
+            let v: serde_json::Value = serde_json::from_str(line).map_err(|source| Error::Json {
+                op: "parse a line of",
+                source,
+                path: path.clone(),
+            })?;
+            let step = v["step"].as_f64().unwrap_or(0.0);
+            if let Some(x) = v["outer"].as_f64() {
+                post.push((step, x));
+            }
+            if let Some(x) = v["outer_pre"].as_f64().filter(|x| *x > 0.0) {
+                pre.push((step, x));
+            }
+        }
+        for (label, pts) in [("after adaptation (θ′)", post), ("before adaptation (θ)", pre)] {
+            if !pts.is_empty() {
+                series.push(milv_plot::Series {
+                    name: format!("{name}: {label}"),
+                    points: moving_average(&pts, window),
+                });
+            }
+        }
+    }
+    let file = out.join("meta_losses.png");
+    milv_plot::lines_png(
+        &file,
+        &series,
+        &format!("Outer loss, moving average of {window} steps"),
+        "meta step",
+        "weighted MSE (action units)",
+    )
+    .map_err(|e| Error::Write {
+        what: "chart",
+        source: Box::new(e),
+        path: file.clone(),
+    })?;
+    Ok(file)
+}
+
+fn moving_average(pts: &[(f64, f64)], window: usize) -> Vec<(f64, f64)> {
+    let w = window.max(1);
+    let mut sum = 0.0;
+    let mut out = Vec::with_capacity(pts.len());
+    for (i, &(x, y)) in pts.iter().enumerate() {
+        sum += y;
+        if i >= w {
+            sum -= pts[i - w].1;
+        }
+        out.push((x, sum / (i + 1).min(w) as f64));
+    }
+    out
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
@@ -270,6 +344,7 @@ mod tests {
             outer: Tensor::randn([8, 3, 16, 16], o),
             actions: Tensor::randn([8, 2], o),
             weights: Tensor::ones([8], o),
+            outer_state: None,
         };
         for _ in 0..3 {
             run.step(std::slice::from_ref(&task));

@@ -163,16 +163,31 @@ pub(crate) struct LoaderArgs {
 
 #[derive(clap::Args, Debug)]
 pub(crate) struct ReportArgs {
-    /// Run folders (each with an eval.jsonl).
+    /// Run folders: A-CycleGAN runs (with an eval.jsonl) get SSIM and action-error
+    /// curves; meta runs (losses.jsonl only) the outer loss after and before adaptation.
     #[arg(required = true)]
     runs: Vec<PathBuf>,
     /// Folder for the charts.
     #[arg(long, short)]
     out: PathBuf,
+    /// Moving-average window of the meta-loss curves (steps).
+    #[arg(long, default_value_t = 25)]
+    window: usize,
 }
 
 pub(crate) fn cmd_report(a: ReportArgs) -> anyhow::Result<u8> {
-    for f in milv_train::gan::train::plot_runs(&a.runs, &a.out)? {
+    let (gan, meta): (Vec<PathBuf>, Vec<PathBuf>) = a
+        .runs
+        .iter()
+        .cloned()
+        .partition(|r| r.join("eval.jsonl").is_file());
+    if !gan.is_empty() {
+        for f in milv_train::gan::train::plot_runs(&gan, &a.out)? {
+            println!("{}", f.display());
+        }
+    }
+    if !meta.is_empty() {
+        let f = milv_train::meta::train::plot_meta_runs(&meta, &a.out, a.window)?;
         println!("{}", f.display());
     }
     Ok(cli::EXIT_OK)

@@ -8,7 +8,9 @@ use anyhow::{Context, bail};
 use milv_cli as cli;
 use milv_data::{Dataset, DatasetRef};
 use milv_train::gan::checkpoint;
-use milv_train::meta::oneshot::{self, EvalOptions, EvalRecord, Family, PolicyLearner};
+use milv_train::meta::oneshot::{
+    self, DemoSource, EvalOptions, EvalRecord, EvalSplit, Family, PolicyLearner,
+};
 use milv_train::meta::policy::{Input, MetaConfig, MetaRun, PolicyConfig, Variant};
 use milv_train::meta::tasks::{MetaDataOptions, MetaSet};
 use milv_train::meta::train::{self as meta_train, MetaRunOptions, PolicyMeta, Translator};
@@ -54,6 +56,22 @@ pub struct MetaArgs {
     /// Scoring run whose curated weights to use (default: the newest over the model).
     #[arg(long)]
     score_run: Option<String>,
+    /// DAML's loss multiplier, inside the square of the adaptation loss: L_ψ = mean((m·out)²).
+    #[arg(long, default_value_t = 50.0)]
+    loss_multiplier: f64,
+    /// Clip each inner-gradient entry to ±this (DAML: 10); 0 turns clipping off.
+    #[arg(long, default_value_t = 10.0)]
+    inner_clip: f64,
+    /// Width of the learned context vector after the spatial softmax (DAML's bias
+    /// transformation, adapted in the inner step); 0 turns it off.
+    #[arg(long, default_value_t = 20)]
+    bias_dim: i64,
+    /// No layer norm after the convolutions (DAML has it, with a learned offset).
+    #[arg(long)]
+    no_layer_norm: bool,
+    /// Width of the fully connected layers (paper: 100; DAML's push: 200).
+    #[arg(long)]
+    hidden: Option<i64>,
     /// Small networks (tests).
     #[arg(long)]
     tiny: bool,
@@ -78,6 +96,14 @@ pub struct EvalArgs {
     /// Evaluation seeds (comma-separated): each draws its own trial instances.
     #[arg(long, value_delimiter = ',', default_value = "0")]
     seeds: Vec<u64>,
+    /// test: the held-out shapes / objects (the paper's protocol); train: the training
+    /// ones at new positions (does the policy fit what it was trained on?).
+    #[arg(long, default_value = "test")]
+    split: EvalSplit,
+    /// own: adapt on a demo of the task executed; swap: on a demo of another task (the
+    /// drop in success measures how much the policy uses the demo).
+    #[arg(long, default_value = "own")]
+    demo: DemoSource,
     /// Use this A-CycleGAN checkpoint instead of the one recorded in the policy.
     #[arg(long)]
     translator: Option<PathBuf>,
@@ -214,11 +240,24 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
         None => {
             let shape = set.input_shape;
             let ad = set.action_dim.max(1);
-            let policy = if a.tiny {
+            let base = if a.tiny {
                 PolicyConfig::tiny(a.variant.input(), shape, ad)
             } else {
                 PolicyConfig::paper(a.variant.input(), shape, ad)
             };
+            let policy = PolicyConfig {
+                loss_multiplier: a.loss_multiplier,
+                inner_clip: a.inner_clip,
+                bias_dim: if a.tiny {
+                    a.bias_dim.min(base.bias_dim)
+                } else {
+                    a.bias_dim
+                },
+                layer_norm: !a.no_layer_norm,
+                hidden: a.hidden.unwrap_or(base.hidden),
+                ..base
+            };
+            policy.validate()?;
             let cfg = MetaConfig {
                 variant: a.variant,
                 steps: a.steps,
@@ -273,7 +312,10 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
         },
         &mut |l| {
             bar.set_position(l.step);
-            bar.set_message(format!("inner {:.4} outer {:.4}", l.losses.inner, l.losses.outer));
+            bar.set_message(format!(
+                "inner {:.4} outer {:.4} (before adaptation {:.4})",
+                l.losses.inner, l.losses.outer, l.losses.outer_pre
+            ));
         },
     )?;
     bar.finish_and_clear();
@@ -281,13 +323,15 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
         cli::print_json(&report)?;
     } else {
         println!(
-            "{} meta-trained to step {} ({} steps, {:.0} ms/step); outer loss {:.4} → {:.4}",
+            "{} meta-trained to step {} ({} steps, {:.0} ms/step); outer loss {:.4} → {:.4} \
+             (before adaptation {:.4})",
             a.variant.name(),
             report.step,
             report.steps_run,
             report.mean_step_ms,
             report.outer_first,
-            report.outer_last
+            report.outer_last,
+            report.outer_pre_last
         );
         if let Some(c) = &report.checkpoint {
             println!("checkpoint {}", c.display());
@@ -295,6 +339,22 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
         println!("losses {}", a.out.join("losses.jsonl").display());
     }
     Ok(cli::EXIT_OK)
+}
+
+impl EvalArgs {
+    fn split_name(&self) -> &'static str {
+        match self.split {
+            EvalSplit::Train => "training",
+            EvalSplit::Test => "held-out",
+        }
+    }
+
+    fn demo_name(&self) -> &'static str {
+        match self.demo {
+            DemoSource::Own => "own",
+            DemoSource::Swap => "swapped",
+        }
+    }
 }
 
 pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
@@ -342,6 +402,8 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
         trials: a.trials,
         seeds: a.seeds.clone(),
         image_size: info.image_size,
+        split: a.split,
+        demo: a.demo,
     };
     let bar = cli::bar(0, "trials");
     let result = oneshot::evaluate_one_shot(&mut learner, &opts, &mut |done, total| {
@@ -366,9 +428,11 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
     } else {
         let r = &record.result;
         println!(
-            "{} on simulated {}: {}/{} = {:.1} % (95 % CI {:.1}–{:.1} %) over {} tasks × {} trials",
+            "{} on simulated {} ({} tasks, {} demos): {}/{} = {:.1} % (95 % CI {:.1}–{:.1} %) over {} tasks × {} trials",
             variant.label(),
             family.name(),
+            a.split_name(),
+            a.demo_name(),
             r.successes,
             r.trials,
             100.0 * r.rate,
