@@ -306,6 +306,54 @@ fn daml_inner_loop_flags_visibility_and_evaluation_options() {
     assert_eq!(code, 0, "{err}");
     assert!(stdout.contains("meta_losses.png"), "{stdout}");
     assert!(std::fs::metadata(charts.join("meta_losses.png")).unwrap().len() > 1000);
+    // DAML robot → robot: the inner step watches another robot demo; eval shows robot demos.
+    let robot = dir.path().join("daml-robot");
+    let mut args = vec![
+        "meta",
+        ds,
+        "--variant",
+        "daml",
+        "--inner",
+        "robot",
+        "--out",
+        s(&robot),
+        "--steps",
+        "2",
+    ];
+    args.extend(TINY);
+    args.push("2");
+    json(&args);
+    let ev = json(&["eval", s(&robot), "--trials", "1", "--threads", "1", "--json"]);
+    assert_eq!(ev["demo_domain"], "robot");
+    let (code, _, err) = run(&[
+        "meta",
+        ds,
+        "--variant",
+        "daml",
+        "--inner",
+        "robot",
+        "--out",
+        s(&robot),
+        "--resume",
+        "--steps",
+        "3",
+        "--tiny",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let (code, _, err) = run(&[
+        "meta",
+        ds,
+        "--variant",
+        "daml",
+        "--out",
+        s(&robot),
+        "--resume",
+        "--steps",
+        "4",
+        "--tiny",
+    ]);
+    assert_eq!(code, 1, "resuming a robot → robot run as human → robot must fail");
+    assert!(err.contains("the data changed"), "{err}");
     let (code, _, err) = run(&[
         "meta",
         ds,

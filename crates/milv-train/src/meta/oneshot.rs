@@ -217,6 +217,8 @@ pub struct EvalOptions {
     pub image_size: u32,
     pub split: EvalSplit,
     pub demo: DemoSource,
+    /// Who performs the demonstration: a human (the protocol) or the robot.
+    pub demo_domain: milv_data::Domain,
 }
 
 /// Outcomes of one held-out task.
@@ -250,7 +252,14 @@ pub struct FamilyResult {
     /// The demonstrations adapted on.
     #[serde(default)]
     pub demo: DemoSource,
+    /// Who performed the demonstrations.
+    #[serde(default = "human_domain")]
+    pub demo_domain: milv_data::Domain,
     pub per_task: Vec<TaskOutcome>,
+}
+
+fn human_domain() -> milv_data::Domain {
+    milv_data::Domain::Human
 }
 
 /// The 95 % Wilson score interval for `k` successes in `n` trials.
@@ -294,8 +303,12 @@ pub fn evaluate_one_shot(
                     }
                 };
                 let empty = || Error::Config(format!("task {name}: empty instance"));
+                let who = match opts.demo_domain {
+                    milv_data::Domain::Human => Domain::Human,
+                    milv_data::Domain::Robot => Domain::Robot,
+                };
                 let demo = rollout(
-                    Sim::reset(demo_task, Domain::Human, opts.image_size).ok_or_else(empty)?,
+                    Sim::reset(demo_task, who, opts.image_size).ok_or_else(empty)?,
                     expert_action,
                 );
                 learner.adapt(&demo.frames)?;
@@ -333,6 +346,7 @@ pub fn evaluate_one_shot(
         trials_per_task: opts.trials * opts.seeds.len(),
         split: opts.split,
         demo: opts.demo,
+        demo_domain: opts.demo_domain,
         per_task,
     })
 }
@@ -580,6 +594,7 @@ mod tests {
                 image_size: 32,
                 split: EvalSplit::Test,
                 demo: DemoSource::Own,
+                demo_domain: milv_data::Domain::Human,
             };
             let got = evaluate_one_shot(&mut Oracle, &opts, &mut |_, _| {}).unwrap();
             let mut expert = 0;
@@ -653,6 +668,7 @@ mod tests {
                 image_size: 32,
                 split,
                 demo,
+                demo_domain: milv_data::Domain::Human,
             };
             let res = evaluate_one_shot(&mut r, &opts, &mut |_, _| {}).unwrap();
             (r.0, res)

@@ -223,12 +223,7 @@ impl PolicyConfig {
         }
         let positive = self.loss_multiplier > 0.0 && self.loss_multiplier.is_finite();
         let clip_ok = self.inner_clip >= 0.0 && self.inner_clip.is_finite();
-        if !positive
-            || !clip_ok
-            || self.bias_dim < 0
-            || self.state_dim < 0
-            || self.hidden < 1
-        {
+        if !positive || !clip_ok || self.bias_dim < 0 || self.state_dim < 0 || self.hidden < 1 {
             return Err(Error::Config(format!(
                 "--loss-multiplier must be positive, --inner-clip, --bias-dim and the state width \
                  non-negative, --hidden positive (got {}, {}, {}, {}, {})",
@@ -254,6 +249,14 @@ pub struct MetaConfig {
     /// and ψ learns nothing.
     pub second_order: bool,
     pub seed: u64,
+    /// Whose video the inner step watches: a human's (the paper) or, for DAML, another
+    /// robot demonstration's frames without actions (DAML's video-only robot → robot).
+    #[serde(default = "human")]
+    pub inner_domain: milv_data::Domain,
+}
+
+fn human() -> milv_data::Domain {
+    milv_data::Domain::Human
 }
 
 impl Default for MetaConfig {
@@ -266,6 +269,7 @@ impl Default for MetaConfig {
             lr: 1e-3,
             second_order: true,
             seed: 0,
+            inner_domain: milv_data::Domain::Human,
         }
     }
 }

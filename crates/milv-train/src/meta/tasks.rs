@@ -70,6 +70,8 @@ pub struct MetaDataOptions {
     pub image_size: u32,
     /// Scoring run for the weights (default: the newest over the model).
     pub score_run: Option<String>,
+    /// Whose demos feed the inner step: human (every variant) or robot (DAML only).
+    pub inner_domain: Domain,
 }
 
 fn decode(img: &Image, size: u32, what: &str) -> Result<Vec<f32>> {
@@ -78,6 +80,15 @@ fn decode(img: &Image, size: u32, what: &str) -> Result<Vec<f32>> {
         .to_rgb8();
     let (w, h) = rgb.dimensions();
     Ok(to_chw(rgb.as_raw(), w, h, size))
+}
+
+/// A clip's frames as `[T, 3, size, size]`.
+fn clip_tensor(clip: &crate::run::Clip, size: u32) -> Result<Tensor> {
+    let mut data = Vec::new();
+    for t in 0..clip.frames.len() {
+        data.extend(clip.tensor_data(t, size)?);
+    }
+    Ok(Tensor::from_slice(&data).view([clip.frames.len() as i64, 3, size as i64, size as i64]))
 }
 
 fn task_of(e: &Episode) -> String {
@@ -115,7 +126,19 @@ impl MetaSet {
             action_std: Vec::new(),
         };
         let mut parts: Vec<String> = vec!["milv-train/meta-data/1".into(), opts.variant.name().into()];
+        if opts.inner_domain == Domain::Robot {
+            if opts.variant != Variant::Daml {
+                return Err(Error::Config(format!(
+                    "--inner robot is DAML's robot → robot setting; variant {} adapts on human videos",
+                    opts.variant.name()
+                )));
+            }
+            parts.push("inner=robot".into());
+        }
         match opts.variant {
+            Variant::Daml if opts.inner_domain == Domain::Robot => {
+                set.load_daml_robot(ds, v, &demos(Domain::Robot), opts.image_size)?
+            }
             Variant::Daml => set.load_daml(ds, v, &humans, &demos(Domain::Robot), opts.image_size)?,
             _ => {
                 let model = opts.model_id.clone().ok_or_else(|| {
@@ -166,6 +189,35 @@ impl MetaSet {
         }
     }
 
+    /// DAML robot → robot: every robot demo is both an inner sequence (its frames, no
+    /// actions) and an outer one (frames and true actions); a task's inner and outer
+    /// demos differ when it has more than one.
+    fn load_daml_robot(
+        &mut self,
+        ds: &Dataset,
+        v: u64,
+        robots: &BTreeMap<String, Episode>,
+        size: u32,
+    ) -> Result<()> {
+        if robots.is_empty() {
+            return Err(Error::Data(format!(
+                "version {v} has no robot demonstrations (domain=robot, kind=demo, split=train)"
+            )));
+        }
+        for clip in load_clips(ds, v, robots, true)?.into_values() {
+            let n = clip.frames.len() as i64;
+            let acts: Vec<f32> = clip.actions.iter().flatten().flatten().copied().collect();
+            let seq = Sequence {
+                frames: clip_tensor(&clip, size)?,
+                actions: Some(Tensor::from_slice(&acts).view([n, -1])),
+                weights: Tensor::ones([n], (tch::Kind::Float, Device::Cpu)),
+                episode_id: clip.episode_id.clone(),
+            };
+            self.push(&task_of(&robots[&clip.episode_id]), seq, true, true);
+        }
+        Ok(())
+    }
+
     fn load_daml(
         &mut self,
         ds: &Dataset,
@@ -180,13 +232,7 @@ impl MetaSet {
                  DAML's outer loss needs them"
             )));
         }
-        let tensor = |clip: &crate::run::Clip| -> Result<Tensor> {
-            let mut data = Vec::new();
-            for t in 0..clip.frames.len() {
-                data.extend(clip.tensor_data(t, size)?);
-            }
-            Ok(Tensor::from_slice(&data).view([clip.frames.len() as i64, 3, size as i64, size as i64]))
-        };
+        let tensor = |clip: &crate::run::Clip| clip_tensor(clip, size);
         for clip in load_clips(ds, v, humans, false)?.into_values() {
             let n = clip.frames.len() as i64;
             let seq = Sequence {

@@ -72,6 +72,10 @@ pub struct MetaArgs {
     /// Width of the fully connected layers (paper: 100; DAML's push: 200).
     #[arg(long)]
     hidden: Option<i64>,
+    /// Whose video the inner step watches: human (the paper), or robot (DAML only: another
+    /// robot demo's frames, no actions — DAML's video-only robot → robot).
+    #[arg(long, default_value = "human")]
+    inner: milv_data::Domain,
     /// Small networks (tests).
     #[arg(long)]
     tiny: bool,
@@ -104,6 +108,10 @@ pub struct EvalArgs {
     /// drop in success measures how much the policy uses the demo).
     #[arg(long, default_value = "own")]
     demo: DemoSource,
+    /// Whose video the learner adapts on (default: the domain the policy's inner step
+    /// trained on).
+    #[arg(long)]
+    demo_domain: Option<milv_data::Domain>,
     /// Use this A-CycleGAN checkpoint instead of the one recorded in the policy.
     #[arg(long)]
     translator: Option<PathBuf>,
@@ -203,6 +211,7 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
             model_id: tr.as_ref().map(|m| m.model_id.clone()),
             image_size,
             score_run: a.score_run.clone(),
+            inner_domain: a.inner,
         },
     )?;
     let (seqs, frames) = set.size();
@@ -266,6 +275,7 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
                 lr: a.lr,
                 second_order: !a.first_order,
                 seed: a.seed,
+                inner_domain: a.inner,
             };
             let info = PolicyMeta {
                 format: String::new(),
@@ -404,6 +414,7 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
         image_size: info.image_size,
         split: a.split,
         demo: a.demo,
+        demo_domain: a.demo_domain.unwrap_or(info.meta.inner_domain),
     };
     let bar = cli::bar(0, "trials");
     let result = oneshot::evaluate_one_shot(&mut learner, &opts, &mut |done, total| {
