@@ -13,7 +13,7 @@
 #   full   the paper's scale, for a GPU: 128×128, 1,320 drawing / 1,000 pushing demos,
 #          long trainings, 50 trials per task (set DEVICE=cpu to force the CPU)
 # Any setting can be overridden from the environment (SIZE, EPISODES, ACG_STEPS,
-# META_STEPS, TRIALS, SEEDS, THREADS, DEVICE, FAMILIES).
+# META_STEPS, TRIALS, SEEDS, THREADS, DEVICE, FAMILIES, ALLOW_WEAK_TRANSLATOR).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scale=${1:-}
@@ -89,9 +89,22 @@ for fam in $FAMILIES; do
       degi) v=$vd; tr=(--translator "$(cat "$F/acg-decoupled/checkpoint.txt")") ;;
       *) v=$vc; tr=(--translator "$(cat "$F/acg-coupled/checkpoint.txt")") ;;
     esac
+    # The imagined-data variants check the translator against the simulator's ground
+    # truth first: a translator whose imagined actions do not follow the true ones is
+    # refused (ALLOW_WEAK_TRANSLATOR=1 trains on them anyway) and its row left out.
+    check=()
+    [ "$variant" != daml ] && check=(--truth "$F/sim/ground_truth.jsonl")
+    [ "$variant" != daml ] && [ "${ALLOW_WEAK_TRANSLATOR:-0}" = 1 ] && check+=(--allow-weak-translator)
     say "$fam: meta-train $variant on $ds@$v, $META_STEPS steps"
-    "$B/milv-train" meta "$ds@$v" --variant "$variant" "${tr[@]}" --out "$F/meta-$variant" \
-      --steps "$META_STEPS" --checkpoint-every "$META_STEPS" "${rt[@]}" | tee -a "$log"
+    if ! "$B/milv-train" meta "$ds@$v" --variant "$variant" "${tr[@]}" --out "$F/meta-$variant" \
+      --steps "$META_STEPS" --checkpoint-every "$META_STEPS" "${check[@]}" "${rt[@]}" \
+      2> "$F/meta-$variant.stderr" | tee -a "$log"; then
+      cat "$F/meta-$variant.stderr" | tee -a "$log" >&2
+      grep -q "refusing to train" "$F/meta-$variant.stderr" || exit 1
+      say "$fam: $variant refused: the translator's imagined actions do not follow the true ones"
+      continue
+    fi
+    cat "$F/meta-$variant.stderr" >> "$log"
     say "$fam: one-shot eval of $variant ($TRIALS trials per held-out task, seeds $SEEDS)"
     "$B/milv-train" eval "$F/meta-$variant" --family "$fam" --trials "$TRIALS" --seeds "$SEEDS" \
       -o "$F/eval-$variant.json" "${rt[@]}" | tee -a "$log"

@@ -202,6 +202,29 @@ fn wrong_translators_and_missing_inputs_are_clear_errors() {
     let (code, _, err) = call(&degi);
     assert_ne!(code, 0);
     assert!(err.contains("decoupled"), "{err}");
+    // A 2-step translator's imagined actions do not follow the true ones: with ground
+    // truth, training on them is refused unless asked for.
+    let mut weak = base("milv", "c");
+    weak.extend([
+        "--translator".into(),
+        s(&coupled).into(),
+        "--truth".into(),
+        s(&fx.truth).into(),
+    ]);
+    let (code, _, err) = call(&weak);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("refusing to train milv") && err.contains("correlate"),
+        "{err}"
+    );
+    assert!(err.contains("--allow-weak-translator"), "{err}");
+    weak.push("--allow-weak-translator".into());
+    let (code, _, err) = call(&weak);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("imagined vs true robot actions") && err.contains("warning"),
+        "{err}"
+    );
     let (code, _, err) = run(&["eval", s(&dir.path().join("nothing"))]);
     assert_ne!(code, 0);
     assert!(err.contains("neither a policy checkpoint"), "{err}");

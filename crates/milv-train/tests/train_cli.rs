@@ -135,6 +135,20 @@ fn trains_resumes_translates_and_evaluates() {
     assert_eq!(ev["step"], 8);
     assert!(ev["ssim_frames"].as_u64().unwrap() > 0);
     assert!(ev["action_mae_zero"].as_f64().unwrap() > 0.0);
+    // π_I on the ground-truth robot demos and on the translated human demos, both against
+    // the true robot actions of every transition of the compared pairs.
+    let pairs = ev["ssim_episodes"].as_u64().unwrap();
+    for key in ["robot_demo_fit", "translated_fit"] {
+        let fit = &ev[key];
+        assert_eq!(
+            fit["frames"].as_u64().unwrap(),
+            ev["ssim_frames"].as_u64().unwrap() - pairs,
+            "{key}: {fit}"
+        );
+        assert_eq!(fit["corr"].as_array().unwrap().len(), 2, "{key}: {fit}");
+        assert!(fit["std_true"][0].as_f64().unwrap() > 0.0, "{key}: {fit}");
+        assert!(fit["mae_zero"].as_f64().unwrap() > 0.0, "{key}: {fit}");
+    }
 }
 
 #[test]

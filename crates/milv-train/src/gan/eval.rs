@@ -16,6 +16,7 @@ use tch::{Kind, Tensor};
 
 use crate::gan::config::ModelConfig;
 use crate::gan::cyclegan::Nets;
+use crate::run::fit::{ActionFit, FitAccumulator};
 use crate::run::image::to_rgb;
 use crate::run::image::{Clip, load_clips, to_chw};
 use crate::{Error, Result};
@@ -34,63 +35,72 @@ fn file_name(uri: &str) -> &str {
     uri.rsplit(['/', '\\']).next().unwrap_or(uri)
 }
 
+/// The (human demo, ground-truth robot demo) episode pairs a truth file names:
+/// JSON lines `{"human": FILE, "robot": FILE}` naming source videos, relative to the truth
+/// file's folder (as milv-sim writes them), matched against the episodes' `source_uri`; the
+/// bare file name is enough when only one episode has it. Entries naming no episode of
+/// `eps` are skipped (a truth file may cover several datasets).
+pub fn truth_pairs(eps: &[Episode], path: &Path) -> Result<Vec<(String, String)>> {
+    let by_uri: BTreeMap<&str, &Episode> = eps.iter().map(|e| (e.source_uri.as_str(), e)).collect();
+    let mut by_file: BTreeMap<&str, Vec<&Episode>> = BTreeMap::new();
+    for e in eps {
+        by_file.entry(file_name(&e.source_uri)).or_default().push(e);
+    }
+    let find = |base: &Path, f: &str| -> Option<&Episode> {
+        let full = base.join(f);
+        let canon = std::fs::canonicalize(&full).unwrap_or_else(|_| full.clone());
+        let uri = |p: &Path| by_uri.get(p.to_string_lossy().as_ref()).copied();
+        uri(&full)
+            .or_else(|| uri(&canon))
+            .or_else(|| match by_file.get(file_name(f)) {
+                Some(v) if v.len() == 1 => Some(v[0]),
+                _ => None,
+            })
+    };
+    let text = std::fs::read_to_string(path).map_err(Error::io("read", path))?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let mut pairs = Vec::new();
+    for (k, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+        let j: serde_json::Value = serde_json::from_str(line)
+            .map_err(|e| Error::Data(format!("{}:{}: {e}", path.display(), k + 1)))?;
+        let (Some(h), Some(r)) = (j["human"].as_str(), j["robot"].as_str()) else {
+            return Err(Error::Data(format!(
+                "{}:{}: expected {{\"human\": FILE, \"robot\": FILE}}",
+                path.display(),
+                k + 1
+            )));
+        };
+        if let (Some(he), Some(re)) = (find(base, h), find(base, r)) {
+            pairs.push((he.episode_id.clone(), re.episode_id.clone()));
+        }
+    }
+    Ok(pairs)
+}
+
 impl EvalSet {
-    /// `truth`: JSON lines `{"human": FILE, "robot": FILE}` naming source videos (matched
-    /// by file name against the episodes' `source_uri`). At most `max_pairs` pairs.
+    /// `truth`: see [`truth_pairs`]; held-out pairs first, at most `max_pairs`.
     pub fn load(ds: &Dataset, v: u64, truth: Option<&Path>, max_pairs: usize) -> Result<EvalSet> {
         let eps = ops::episodes(ds, v)?;
-        let by_uri: BTreeMap<&str, &Episode> = eps.iter().map(|e| (e.source_uri.as_str(), e)).collect();
-        let mut by_file: BTreeMap<&str, Vec<&Episode>> = BTreeMap::new();
-        for e in &eps {
-            by_file.entry(file_name(&e.source_uri)).or_default().push(e);
-        }
-        // A truth entry names a file relative to the truth file's folder (as milv-sim
-        // writes it); the bare file name is enough when only one episode has it.
-        let find = |base: &Path, f: &str| -> Option<&Episode> {
-            let full = base.join(f);
-            let canon = std::fs::canonicalize(&full).unwrap_or_else(|_| full.clone());
-            let uri = |p: &Path| by_uri.get(p.to_string_lossy().as_ref()).copied();
-            uri(&full)
-                .or_else(|| uri(&canon))
-                .or_else(|| match by_file.get(file_name(f)) {
-                    Some(v) if v.len() == 1 => Some(v[0]),
-                    _ => None,
-                })
+        let mut wanted_pairs = match truth {
+            Some(path) => truth_pairs(&eps, path)?,
+            None => Vec::new(),
         };
-        let mut wanted_pairs: Vec<(String, String)> = Vec::new();
-        if let Some(path) = truth {
-            let text = std::fs::read_to_string(path).map_err(Error::io("read", path))?;
-            for (k, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
-                let j: serde_json::Value = serde_json::from_str(line)
-                    .map_err(|e| Error::Data(format!("{}:{}: {e}", path.display(), k + 1)))?;
-                let (Some(h), Some(r)) = (j["human"].as_str(), j["robot"].as_str()) else {
-                    return Err(Error::Data(format!(
-                        "{}:{}: expected {{\"human\": FILE, \"robot\": FILE}}",
-                        path.display(),
-                        k + 1
-                    )));
-                };
-                let base = path.parent().unwrap_or(Path::new("."));
-                if let (Some(he), Some(re)) = (find(base, h), find(base, r)) {
-                    wanted_pairs.push((he.episode_id.clone(), re.episode_id.clone()));
-                }
-            }
-            // Held-out tasks first: they say most about generalisation.
-            wanted_pairs
-                .sort_by_key(|(h, _)| eps.iter().any(|e| &e.episode_id == h && e.split == Split::Train));
-            wanted_pairs.truncate(max_pairs);
-        }
-        let pick = |ids: &[&String]| -> BTreeMap<String, Episode> {
+        // Held-out tasks first: they say most about generalisation.
+        wanted_pairs.sort_by_key(|(h, _)| eps.iter().any(|e| &e.episode_id == h && e.split == Split::Train));
+        wanted_pairs.truncate(max_pairs);
+        let pick = |ids: Vec<&String>| -> BTreeMap<String, Episode> {
             eps.iter()
                 .filter(|e| ids.contains(&&e.episode_id))
                 .map(|e| (e.episode_id.clone(), e.clone()))
                 .collect()
         };
-        let ids: Vec<&String> = wanted_pairs.iter().flat_map(|(h, r)| [h, r]).collect();
-        let mut clips = load_clips(ds, v, &pick(&ids), false)?;
+        let mut humans = load_clips(ds, v, &pick(wanted_pairs.iter().map(|(h, _)| h).collect()), false)?;
+        // The robot demos with their actions: π_I is measured on them, and on the
+        // translated human demos against them.
+        let robots = load_clips(ds, v, &pick(wanted_pairs.iter().map(|(_, r)| r).collect()), true)?;
         let pairs = wanted_pairs
             .iter()
-            .filter_map(|(h, r)| Some((clips.remove(h)?, clips.get(r)?.clone())))
+            .filter_map(|(h, r)| Some((humans.remove(h)?, robots.get(r)?.clone())))
             .collect();
         let held: BTreeMap<String, Episode> = eps
             .iter()
@@ -125,6 +135,11 @@ pub struct EvalReport {
     /// Mean absolute action (the error of always predicting 0).
     pub action_mae_zero: Option<f64>,
     pub action_frames: usize,
+    /// π_I on the ground-truth robot demos of the pairs (mostly held-out tasks).
+    pub robot_demo_fit: Option<ActionFit>,
+    /// π_I on consecutive translations G(x^h_t), G(x^h_t+1) of the human demos — the
+    /// imagined actions the meta-policies train on — against the true robot actions.
+    pub translated_fit: Option<ActionFit>,
 }
 
 /// Evaluates `nets` on `set` (no gradients).
@@ -142,12 +157,22 @@ pub fn evaluate_translation(nets: &Nets, set: &EvalSet, cfg: &ModelConfig) -> Re
     };
     let mut rep = EvalReport::default();
     let (mut sum, mut sum_raw) = (0.0, 0.0);
+    let d = cfg.action_dim as usize;
+    let predict = |a: &Tensor, b: &Tensor| -> Result<Vec<f32>> {
+        let pred = tch::no_grad(|| nets.predict_action(a, b)).to_kind(Kind::Float);
+        Ok(Vec::try_from(
+            pred.to_device(tch::Device::Cpu).contiguous().view([-1]),
+        )?)
+    };
+    let (mut on_robot, mut on_translated) = (FitAccumulator::new(d), FitAccumulator::new(d));
     for (h, r) in &set.pairs {
         let n = h.frames.len().min(r.frames.len());
+        let mut fakes = Vec::new();
         for start in (0..n).step_by(CHUNK) {
             let range = start..(start + CHUNK).min(n);
             let x = batch(h, range.clone())?;
             let fake = tch::no_grad(|| nets.g.forward(&x));
+            fakes.push(fake.shallow_clone());
             for (k, t) in range.enumerate() {
                 let ours = to_rgb(&fake.get(k as i64))?;
                 let truth = to_rgb(
@@ -174,7 +199,28 @@ pub fn evaluate_translation(nets: &Nets, set: &EvalSet, cfg: &ModelConfig) -> Re
             }
         }
         rep.ssim_episodes += 1;
+        // Action t moves frame t to t+1: compare it with π_I on both kinds of frame pair.
+        let Some(actions) = &r.actions else { continue };
+        let translated = Tensor::cat(&fakes, 0);
+        for start in (0..n.saturating_sub(1)).step_by(CHUNK) {
+            let range = start..(start + CHUNK).min(n - 1);
+            let len = range.len() as i64;
+            let on_fakes = predict(
+                &translated.narrow(0, start as i64, len),
+                &translated.narrow(0, start as i64 + 1, len),
+            )?;
+            let on_real = predict(
+                &batch(r, range.clone())?,
+                &batch(r, range.start + 1..range.end + 1)?,
+            )?;
+            for (k, t) in range.enumerate() {
+                on_translated.push(&on_fakes[k * d..(k + 1) * d], &actions[t]);
+                on_robot.push(&on_real[k * d..(k + 1) * d], &actions[t]);
+            }
+        }
     }
+    rep.robot_demo_fit = on_robot.finish();
+    rep.translated_fit = on_translated.finish();
     if rep.ssim_frames > 0 {
         rep.ssim = Some(sum / rep.ssim_frames as f64);
         rep.ssim_untranslated = Some(sum_raw / rep.ssim_frames as f64);
@@ -185,13 +231,10 @@ pub fn evaluate_translation(nets: &Nets, set: &EvalSet, cfg: &ModelConfig) -> Re
         let n = c.frames.len();
         for start in (0..n - 1).step_by(CHUNK) {
             let range = start..(start + CHUNK).min(n - 1);
-            let (a, b) = (
-                batch(c, range.clone())?,
-                batch(c, range.start + 1..range.end + 1)?,
-            );
-            let pred = tch::no_grad(|| nets.predict_action(&a, &b)).to_kind(Kind::Float);
-            let p: Vec<f32> = Vec::try_from(pred.to_device(tch::Device::Cpu).contiguous().view([-1]))?;
-            let d = cfg.action_dim as usize;
+            let p = predict(
+                &batch(c, range.clone())?,
+                &batch(c, range.start + 1..range.end + 1)?,
+            )?;
             for (k, t) in range.enumerate() {
                 for j in 0..d.min(actions[t].len()) {
                     let e = f64::from(p[k * d + j] - actions[t][j]);

@@ -8,12 +8,14 @@
 //! | [`layers`] | layers both networks use (spatial softmax) |
 //! | [`adam`] | Adam with its moments in named tensors (exact resume) |
 //! | [`device`] | `cpu` / `cuda` / `auto` |
+//! | [`fit`] | predicted vs true actions: error, correlation, spread ([`fit::ActionFit`]) |
 //!
 //! and [`Start`]: where a run begins — fresh, or resumed from its newest checkpoint on the
 //! version and data it trained on — for both training commands.
 
 pub mod adam;
 pub mod device;
+pub mod fit;
 pub mod folder;
 pub mod image;
 pub mod layers;

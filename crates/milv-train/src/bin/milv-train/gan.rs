@@ -390,6 +390,15 @@ pub(crate) fn cmd_eval_translation(a: EvalTranslationArgs) -> anyhow::Result<u8>
             rep.action_frames,
             f(rep.action_mae_zero)
         );
+        if let Some(fit) = &rep.robot_demo_fit {
+            println!("π_I on the ground-truth robot demos: {}", fit.summary());
+        }
+        if let Some(fit) = &rep.translated_fit {
+            println!(
+                "π_I on translated human demos (the imagined actions) vs the true robot actions: {}",
+                fit.summary()
+            );
+        }
     }
     Ok(cli::EXIT_OK)
 }

@@ -8,6 +8,7 @@ use anyhow::{Context, bail};
 use milv_cli as cli;
 use milv_data::{Dataset, DatasetRef};
 use milv_train::gan::checkpoint;
+use milv_train::meta::check;
 use milv_train::meta::oneshot::{
     self, DemoSource, EvalOptions, EvalRecord, EvalSplit, Family, PolicyLearner,
 };
@@ -76,6 +77,15 @@ pub struct MetaArgs {
     /// robot demo's frames, no actions — DAML's video-only robot → robot).
     #[arg(long, default_value = "human")]
     inner: milv_data::Domain,
+    /// Ground-truth human/robot demo pairs (milv-sim's ground_truth.jsonl): an imagined-data
+    /// variant is refused when the translator's imagined actions correlate < 0.5 with the
+    /// true robot actions. Without it, a warning when their spread is under a quarter of
+    /// the robot random videos'.
+    #[arg(long)]
+    truth: Option<PathBuf>,
+    /// Train on imagined actions even when --truth says they do not follow the true ones.
+    #[arg(long)]
+    allow_weak_translator: bool,
     /// Small networks (tests).
     #[arg(long)]
     tiny: bool,
@@ -237,6 +247,31 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
              to imitate. With imagined data this means the translator's inverse-dynamics model does not \
              tell the translated frames apart: train the A-CycleGAN longer (check `milv-train eval-translation`)."
         );
+    }
+    if a.variant != Variant::Daml {
+        let check = check::check_imagined(&ds, version, &set, a.truth.as_deref())?;
+        if let Some(fit) = &check.fit {
+            eprintln!(
+                "milv-train meta: imagined vs true robot actions: {}",
+                fit.summary()
+            );
+        }
+        match check.problem() {
+            Some(check::Problem::Uncorrelated(why)) if !a.allow_weak_translator => bail!(
+                "refusing to train {} on translator {}: {why}; train the A-CycleGAN further \
+                 (`milv-train eval-translation --truth` shows π_I on translated demos), or pass \
+                 --allow-weak-translator",
+                a.variant.name(),
+                a.translator
+                    .as_ref()
+                    .map(|p| p.display().to_string())
+                    .unwrap_or_default()
+            ),
+            Some(check::Problem::Uncorrelated(why) | check::Problem::NarrowSpread(why)) => {
+                eprintln!("milv-train meta: warning: {why}")
+            }
+            None => {}
+        }
     }
     start.check_digest(&set.digest)?;
     let (mut run, info) = match &start.checkpoint {

@@ -1,0 +1,95 @@
+#!/usr/bin/env bash
+# The diagnostic ladder of the meta-policies (RESULTS.md, "Diagnostic ladder"): from
+# behaviour cloning up to DAML human → robot, each rung one meta-training run and its
+# one-shot evaluations, so the lowest failing rung is found before the next is climbed.
+#
+# usage: tools/ladder.sh FAMILY RUNG... [--out DIR]
+#   FAMILY  drawing | pushing
+#   RUNG    data  milv-sim gen + milv-ingest (EPISODES task instances, seed 11, SIZE px)
+#           r1    behaviour cloning on every instance (DAML with α = 0: the demo is ignored),
+#                 evaluated on the training shapes / objects at new positions
+#           r2    DAML robot → robot (the inner step sees another robot demo's frames, no
+#                 actions), evaluated on held-out and training tasks, own and swapped demos
+#           r3    DAML human → robot, training tasks
+#           r4    r3's policy on held-out tasks (reports in r3/)
+# Settings from the environment: EPISODES (150), SIZE (64), STEPS (1500), TRIALS per task
+# and seed (3), SEEDS (0,1), THREADS (2), MILV_BIN (target/debug). A rung whose run folder
+# holds checkpoints resumes it (up to STEPS); every report lands in OUT/FAMILY/RUNG/.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+fam=${1:-}
+shift || true
+rungs=()
+out=out/ladder
+while [ $# -gt 0 ]; do
+  case $1 in
+    --out) out=$2; shift 2 ;;
+    data|r1|r2|r3|r4) rungs+=("$1"); shift ;;
+    *) echo "unknown argument $1 (rungs: data r1 r2 r3 r4)" >&2; exit 2 ;;
+  esac
+done
+case $fam in
+  drawing|pushing) ;;
+  *) echo "usage: tools/ladder.sh drawing|pushing RUNG... [--out DIR]" >&2; exit 2 ;;
+esac
+[ ${#rungs[@]} -gt 0 ] || { echo "name at least one rung: data r1 r2 r3 r4" >&2; exit 2; }
+: "${EPISODES:=150}" "${SIZE:=64}" "${STEPS:=1500}" "${TRIALS:=3}" "${SEEDS:=0,1}" "${THREADS:=2}"
+B=${MILV_BIN:-$PWD/target/debug}
+[ -x "$B/milv-train" ] || tools/setup.sh
+F="$out/$fam"
+ds="$F/dataset"
+rt=(--threads "$THREADS")
+field() { python3 -c "import json,sys; d=json.load(sys.stdin); print($1)"; }
+
+# meta RUNG ARGS...: meta-trains (or resumes) the rung's policy to STEPS steps.
+meta() {
+  local r=$1
+  shift
+  local resume=()
+  ls "$F/$r/run/checkpoints"/step-* >/dev/null 2>&1 && resume=(--resume)
+  "$B/milv-train" meta "$ds" --variant daml --out "$F/$r/run" --steps "$STEPS" \
+    --checkpoint-every 250 "${resume[@]}" "$@" "${rt[@]}" --json > "$F/$r/meta.json"
+  field "'meta: step %d, outer loss %.4f -> %.4f after adaptation, %.4f before (first and last tenth of the steps run)' % (d['step'], d['outer_first'], d['outer_last'], d['outer_pre_last'])" < "$F/$r/meta.json"
+}
+
+# eval RUNG NAME ARGS...: one-shot evaluation, report in RUNG/eval-NAME.json.
+evaluate() {
+  local r=$1 name=$2
+  shift 2
+  "$B/milv-train" eval "$F/$r/run" --family "$fam" --trials "$TRIALS" --seeds "$SEEDS" "$@" \
+    "${rt[@]}" --json -o "$F/$r/eval-$name.json" > /dev/null
+  field "'eval $name: %d/%d (%.1f %%, 95 %% CI %.1f-%.1f), wrong object %d, control %d' % (d['successes'], d['trials'], 100*d['rate'], 100*d['wilson95'][0], 100*d['wilson95'][1], d['wrong_object'], d['control'])" \
+    < "$F/$r/eval-$name.json"
+}
+
+for r in "${rungs[@]}"; do
+  start=$(date +%s)
+  echo "== $fam $r"
+  mkdir -p "$F/$r"
+  case $r in
+    data)
+      if [ -d "$ds" ]; then
+        echo "dataset $ds exists"
+      else
+        "$B/milv-sim" gen --task "$fam" --episodes "$EPISODES" --seed 11 --size "$SIZE" --out "$F/sim"
+        "$B/milv-ingest" "$ds" --manifest "$F/sim/manifest.jsonl" --require-actions
+      fi ;;
+    r1)
+      meta r1 --alpha 0
+      evaluate r1 train --split train ;;
+    r2)
+      meta r2 --inner robot
+      evaluate r2 test --split test
+      evaluate r2 test-swap --split test --demo swap
+      evaluate r2 train --split train
+      evaluate r2 train-swap --split train --demo swap ;;
+    r3)
+      # R3 and R4 are one run (DAML human → robot), evaluated on both splits.
+      meta r3
+      evaluate r3 train --split train ;;
+    r4)
+      [ -d "$F/r3/run" ] || { echo "run r3 first: R4 evaluates its policy on held-out tasks" >&2; exit 2; }
+      evaluate r3 test --split test ;;
+  esac
+  echo "($r took $(( ($(date +%s) - start) / 60 )) min)"
+done
