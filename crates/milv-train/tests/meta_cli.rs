@@ -133,6 +133,13 @@ fn every_variant_meta_trains_resumes_and_is_evaluated_one_shot() {
         ]);
         assert_eq!(ev["family"], "drawing");
         assert_eq!(ev["trials"], 12);
+        // The inner step's effect on the evaluated instances: the imitation loss of the
+        // expert's rollouts before and after adapting, which one step must change.
+        let (pre, post) = (
+            ev["loss_pre"].as_f64().unwrap(),
+            ev["loss_post"].as_f64().unwrap(),
+        );
+        assert!(pre > 0.0 && post > 0.0 && pre != post, "{variant}: {pre} {post}");
         assert_eq!(ev["per_task"].as_array().unwrap().len(), 12);
         let lo = ev["wilson95"][0].as_f64().unwrap();
         let rate = ev["rate"].as_f64().unwrap();

@@ -36,6 +36,12 @@ pub trait OneShot {
     /// The action for the current robot frame (RGB24). `sim` is there for privileged
     /// oracles; a learned policy reads only `frame`.
     fn act(&mut self, sim: &Sim, frame: &[u8]) -> Result<Vec2>;
+    /// The imitation loss (the outer loss's units) of the policy before and after the last
+    /// adaptation, on robot `frames` whose expert actions are `actions`; None for a
+    /// learner without parameters (the oracle).
+    fn imitation_loss(&mut self, _frames: &[Vec<u8>], _actions: &[[f32; 2]]) -> Result<Option<[f64; 2]>> {
+        Ok(None)
+    }
 }
 
 /// The scripted expert behind the [`OneShot`] interface: an upper bound, and a check that
@@ -255,6 +261,13 @@ pub struct FamilyResult {
     /// Who performed the demonstrations.
     #[serde(default = "human_domain")]
     pub demo_domain: milv_data::Domain,
+    /// Mean imitation loss over the trials before (θ) and after (θ′) adapting on the demo,
+    /// on the expert's rollout of each trial's execution instance: how much the inner step
+    /// helps on the instances evaluated (absent for the oracle and older reports).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_pre: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loss_post: Option<f64>,
     pub per_task: Vec<TaskOutcome>,
 }
 
@@ -288,6 +301,7 @@ pub fn evaluate_one_shot(
     let total = names.len() * opts.seeds.len() * opts.trials;
     let mut done = 0;
     let mut per_task = Vec::with_capacity(names.len());
+    let (mut pre, mut post, mut measured) = (0.0, 0.0, 0usize);
     for (k, name) in names.iter().enumerate() {
         let mut o = TaskOutcome {
             task: name.clone(),
@@ -312,6 +326,15 @@ pub fn evaluate_one_shot(
                     expert_action,
                 );
                 learner.adapt(&demo.frames)?;
+                let expert = rollout(
+                    Sim::reset(exec_task.clone(), Domain::Robot, opts.image_size).ok_or_else(empty)?,
+                    expert_action,
+                );
+                // The last frame's action is a placeholder (no step follows it).
+                let n = expert.frames.len().saturating_sub(1);
+                if let Some([a, b]) = learner.imitation_loss(&expert.frames[..n], &expert.actions[..n])? {
+                    (pre, post, measured) = (pre + a, post + b, measured + 1);
+                }
                 let mut sim = Sim::reset(exec_task, Domain::Robot, opts.image_size).ok_or_else(empty)?;
                 while !sim.done() {
                     let frame = sim.observe();
@@ -347,6 +370,8 @@ pub fn evaluate_one_shot(
         split: opts.split,
         demo: opts.demo,
         demo_domain: opts.demo_domain,
+        loss_pre: (measured > 0).then(|| pre / measured as f64),
+        loss_post: (measured > 0).then(|| post / measured as f64),
         per_task,
     })
 }
@@ -402,6 +427,15 @@ impl PolicyLearner {
             .view([frames.len() as i64, 3, i64::from(s), i64::from(s)])
             .to_device(self.device())
     }
+
+    /// Robot frames as the policy reads them: images, or F's latents of them.
+    fn observations(&self, frames: &[&[u8]]) -> Tensor {
+        let y = self.images(frames);
+        match (self.net.cfg.input, &self.translator) {
+            (Input::Latent, Some(n)) => tch::no_grad(|| n.f.encode(&y)),
+            _ => y,
+        }
+    }
 }
 
 impl OneShot for PolicyLearner {
@@ -432,20 +466,31 @@ impl OneShot for PolicyLearner {
             .adapted
             .as_ref()
             .ok_or_else(|| Error::Config("act before adapt".into()))?;
-        let y = self.images(&[frame]);
-        let a = tch::no_grad(|| {
-            let obs = match (self.net.cfg.input, &self.translator) {
-                (Input::Latent, Some(n)) => n.f.encode(&y),
-                _ => y,
-            };
-            self.net.act(th, &obs)
-        });
+        let obs = self.observations(&[frame]);
+        let a = tch::no_grad(|| self.net.act(th, &obs));
         let s = self.net.cfg.action_scale;
         let v: Vec<f32> = Vec::try_from(a.to_device(Device::Cpu).contiguous().view([-1]))?;
         Ok(Vec2::new(
             v.first().copied().unwrap_or(0.0) * s as f32,
             v.get(1).copied().unwrap_or(0.0) * s as f32,
         ))
+    }
+
+    fn imitation_loss(&mut self, frames: &[Vec<u8>], actions: &[[f32; 2]]) -> Result<Option<[f64; 2]>> {
+        let th = self
+            .adapted
+            .as_ref()
+            .ok_or_else(|| Error::Config("imitation loss before adapt".into()))?;
+        let frames: Vec<&[u8]> = frames.iter().map(Vec::as_slice).collect();
+        let obs = self.observations(&frames);
+        let scale = self.net.cfg.action_scale as f32;
+        let flat: Vec<f32> = actions.iter().flat_map(|a| a.map(|x| x / scale)).collect();
+        let target = Tensor::from_slice(&flat).view([-1, 2]).to_device(self.device());
+        let ones = Tensor::ones([target.size()[0]], (tch::Kind::Float, self.device()));
+        let loss = |params: &[Tensor]| -> f64 {
+            tch::no_grad(|| self.net.bc_loss(params, &obs, &target, &ones)).double_value(&[])
+        };
+        Ok(Some([loss(&self.net.theta), loss(th)]))
     }
 }
 

@@ -490,6 +490,13 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
         if family == Family::Pushing {
             println!("failures: wrong object {}, control {}", r.wrong_object, r.control);
         }
+        if let (Some(pre), Some(post)) = (r.loss_pre, r.loss_post) {
+            println!(
+                "imitation loss on the expert's rollouts of the evaluated instances: {pre:.4} before adapting, \
+                 {post:.4} after ({:.2}×)",
+                post / pre
+            );
+        }
         for t in &r.per_task {
             println!("  {:<24} {:>3}/{}", t.task, t.successes, t.trials);
         }
