@@ -18,7 +18,7 @@ use crate::gan::data::{Loader, TrainingSet};
 use crate::gan::eval::{EvalReport, EvalSet, evaluate_translation};
 use crate::run::DataRef;
 use crate::run::image::to_rgb;
-use crate::run::log::append_json;
+use crate::run::log::{append_json, truncate_after};
 use crate::run::time_steps;
 use crate::{Error, Result};
 
@@ -87,6 +87,9 @@ pub fn train_cyclegan(
     }
     let losses_path = opts.out.join("losses.jsonl");
     let eval_path = opts.out.join("eval.jsonl");
+    for log in [&losses_path, &eval_path] {
+        truncate_after(log, run.step)?;
+    }
     let ckpt_dir = opts.out.join("checkpoints");
     let size = run.model.image_size as u32;
     let grid_src = grid_inputs(&set, size)?;

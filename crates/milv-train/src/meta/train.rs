@@ -14,7 +14,7 @@ use tch::{Device, Kind, Tensor};
 use crate::meta::policy::{Input, MetaConfig, MetaLosses, MetaRun, MetaTask, PolicyConfig, Variant};
 use crate::meta::tasks::MetaSet;
 use crate::run::folder::{DataRef, write_dir, write_json};
-use crate::run::log::append_json;
+use crate::run::log::{append_json, truncate_after};
 use crate::{Error, Result};
 
 const FORMAT: &str = "milv-meta/1";
@@ -148,6 +148,7 @@ pub fn train_meta(
 ) -> Result<MetaReport> {
     std::fs::create_dir_all(&opts.out).map_err(Error::io("create folder", &opts.out))?;
     let losses_path = opts.out.join("losses.jsonl");
+    truncate_after(&losses_path, run.step)?;
     let ckpt_dir = opts.out.join("checkpoints");
     let device = run.net.vs.device();
     let scale = run.net.cfg.action_scale;
