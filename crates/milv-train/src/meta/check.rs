@@ -16,7 +16,7 @@ use serde::Serialize;
 use crate::Result;
 use crate::gan::eval::truth_pairs;
 use crate::meta::tasks::MetaSet;
-use crate::run::fit::{ActionFit, FitAccumulator};
+use crate::run::fit::{ActionFit, FitAccumulator, mean};
 use crate::run::image::load_clips;
 
 /// Below this mean correlation with the true actions a translator is refused.
@@ -41,14 +41,6 @@ pub enum Problem {
     Uncorrelated(String),
     /// No ground truth, and the imagined actions barely vary: warn.
     NarrowSpread(String),
-}
-
-fn mean(x: &[f64]) -> f64 {
-    if x.is_empty() {
-        0.0
-    } else {
-        x.iter().sum::<f64>() / x.len() as f64
-    }
 }
 
 impl ImaginedCheck {

@@ -90,7 +90,8 @@ impl FitAccumulator {
     }
 }
 
-fn mean(x: &[f64]) -> f64 {
+/// Mean of `x`; 0 when empty.
+pub(crate) fn mean(x: &[f64]) -> f64 {
     if x.is_empty() {
         0.0
     } else {
