@@ -55,6 +55,24 @@ fn generated_episodes_ingest_cleanly_and_are_deterministic() {
         })
         .sum();
     assert_eq!(ing["frames"].as_u64().unwrap(), 8 * 51 + paired_robot_frames);
+    // instances.jsonl: one row per instance, the task itself (what `eval --instances` runs),
+    // naming its robot demo.
+    let inst: Vec<serde_json::Value> = std::fs::read_to_string(out.join("instances.jsonl"))
+        .unwrap()
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(inst.len(), 2);
+    for (i, row) in inst.iter().enumerate() {
+        assert_eq!(row["index"], i);
+        assert_eq!(row["task"]["family"], "drawing");
+        assert!(
+            row["task"]["shape"]["path"].as_array().unwrap().len() > 2,
+            "{row}"
+        );
+        let robot = row["robot"].as_str().unwrap();
+        assert!(out.join(robot).exists(), "{robot}");
+    }
     let info = ds_json(&["info", path_str(&ds)]);
     assert_eq!(info["by_domain_kind"]["human/demo"], 2);
     assert_eq!(info["by_domain_kind"]["robot/random"], 2);

@@ -6,6 +6,9 @@
 # usage: tools/ladder.sh FAMILY RUNG... [--out DIR]
 #   FAMILY  drawing | pushing
 #   RUNG    data  milv-sim gen + milv-ingest (EPISODES task instances, seed 11, SIZE px)
+#           r0    behaviour cloning on ONE robot demo, evaluated on that instance from 5
+#                 other start positions; one run per instance of R0_SEEDS (gen seeds,
+#                 "11 12 13"), R0_STEPS (300) steps each; reports in r0/seed-S/
 #           r1    behaviour cloning on every instance (DAML with α = 0: the demo is ignored),
 #                 evaluated on the training shapes / objects at new positions
 #           r2    DAML robot → robot (the inner step sees another robot demo's frames, no
@@ -24,15 +27,16 @@ out=out/ladder
 while [ $# -gt 0 ]; do
   case $1 in
     --out) out=$2; shift 2 ;;
-    data|r1|r2|r3|r4) rungs+=("$1"); shift ;;
-    *) echo "unknown argument $1 (rungs: data r1 r2 r3 r4)" >&2; exit 2 ;;
+    data|r0|r1|r2|r3|r4) rungs+=("$1"); shift ;;
+    *) echo "unknown argument $1 (rungs: data r0 r1 r2 r3 r4)" >&2; exit 2 ;;
   esac
 done
 case $fam in
   drawing|pushing) ;;
   *) echo "usage: tools/ladder.sh drawing|pushing RUNG... [--out DIR]" >&2; exit 2 ;;
 esac
-[ ${#rungs[@]} -gt 0 ] || { echo "name at least one rung: data r1 r2 r3 r4" >&2; exit 2; }
+[ ${#rungs[@]} -gt 0 ] || { echo "name at least one rung: data r0 r1 r2 r3 r4" >&2; exit 2; }
+: "${R0_SEEDS:=11 12 13}" "${R0_STEPS:=300}"
 : "${EPISODES:=150}" "${SIZE:=64}" "${STEPS:=1500}" "${TRIALS:=3}" "${SEEDS:=0,1}" "${THREADS:=2}"
 B=${MILV_BIN:-$PWD/target/debug}
 [ -x "$B/milv-train" ] || tools/setup.sh
@@ -41,13 +45,14 @@ ds="$F/dataset"
 rt=(--threads "$THREADS")
 field() { python3 -c "import json,sys; d=json.load(sys.stdin); print($1)"; }
 
-# meta RUNG ARGS...: meta-trains (or resumes) the rung's policy to STEPS steps.
+# meta RUNG ARGS...: meta-trains (or resumes) the rung's policy to STEPS steps on DS
+# (default: the ladder's dataset); RUNG is a folder under OUT/FAMILY.
 meta() {
   local r=$1
   shift
   local resume=()
   ls "$F/$r/run/checkpoints"/step-* >/dev/null 2>&1 && resume=(--resume)
-  "$B/milv-train" meta "$ds" --variant daml --out "$F/$r/run" --steps "$STEPS" \
+  "$B/milv-train" meta "${DS:-$ds}" --variant daml --out "$F/$r/run" --steps "$STEPS" \
     --checkpoint-every 250 "${resume[@]}" "$@" "${rt[@]}" --json > "$F/$r/meta.json"
   field "'meta: step %d, outer loss %.4f -> %.4f after adaptation, %.4f before (first and last tenth of the steps run)' % (d['step'], d['outer_first'], d['outer_last'], d['outer_pre_last'])" < "$F/$r/meta.json"
 }
@@ -58,8 +63,18 @@ evaluate() {
   shift 2
   "$B/milv-train" eval "$F/$r/run" --family "$fam" --trials "$TRIALS" --seeds "$SEEDS" "$@" \
     "${rt[@]}" --json -o "$F/$r/eval-$name.json" > /dev/null
-  field "'eval $name: %d/%d (%.1f %%, 95 %% CI %.1f-%.1f), wrong object %d, control %d' % (d['successes'], d['trials'], 100*d['rate'], 100*d['wilson95'][0], 100*d['wilson95'][1], d['wrong_object'], d['control'])" \
+  field "'eval $name: %d/%d (%.1f %%, 95 %% CI %.1f-%.1f), wrong object %d, control %d, loss %.4f before adapting, %.4f after' % (d['successes'], d['trials'], 100*d['rate'], 100*d['wilson95'][0], 100*d['wilson95'][1], d['wrong_object'], d['control'], d.get('loss_pre', float('nan')), d.get('loss_post', float('nan')))" \
     < "$F/$r/eval-$name.json"
+}
+
+# gen_ingest N SEED DIR: milv-sim gen + milv-ingest into DIR/sim and DIR/dataset.
+gen_ingest() {
+  if [ -d "$3/dataset" ]; then
+    echo "dataset $3/dataset exists"
+  else
+    "$B/milv-sim" gen --task "$fam" --episodes "$1" --seed "$2" --size "$SIZE" --out "$3/sim"
+    "$B/milv-ingest" "$3/dataset" --manifest "$3/sim/manifest.jsonl" --require-actions
+  fi
 }
 
 for r in "${rungs[@]}"; do
@@ -68,12 +83,16 @@ for r in "${rungs[@]}"; do
   mkdir -p "$F/$r"
   case $r in
     data)
-      if [ -d "$ds" ]; then
-        echo "dataset $ds exists"
-      else
-        "$B/milv-sim" gen --task "$fam" --episodes "$EPISODES" --seed 11 --size "$SIZE" --out "$F/sim"
-        "$B/milv-ingest" "$ds" --manifest "$F/sim/manifest.jsonl" --require-actions
-      fi ;;
+      gen_ingest "$EPISODES" 11 "$F" ;;
+    r0)
+      # One instance per run: milv-sim's first instance of each gen seed.
+      for s in $R0_SEEDS; do
+        d="r0/seed-$s"
+        mkdir -p "$F/$d"
+        gen_ingest 1 "$s" "$F/$d" > /dev/null
+        DS="$F/$d/dataset" STEPS=$R0_STEPS meta "$d" --alpha 0
+        TRIALS=5 SEEDS=0 evaluate "$d" instance --instances "$F/$d/sim/instances.jsonl"
+      done ;;
     r1)
       meta r1 --alpha 0
       evaluate r1 train --split train ;;

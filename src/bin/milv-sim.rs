@@ -46,7 +46,8 @@ enum Cmd {
     /// paired human/robot pair (same motion, random monotone time warps, different
     /// lengths), all with actions and states; deterministic by seed. Also writes
     /// `warps.jsonl` (ground-truth frame correspondence of each pair) and
-    /// `ground_truth.jsonl` (robot demo = ground-truth robot rendering of each human demo).
+    /// `ground_truth.jsonl` (robot demo = ground-truth robot rendering of each human demo)
+    /// and `instances.jsonl` (each task instance, for `milv-train eval --instances`).
     Gen {
         /// Task family.
         #[arg(long, value_enum, default_value = "drawing")]
@@ -174,6 +175,7 @@ fn generate(
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let mut manifest = Vec::new();
     let mut ground_truth = Vec::new();
+    let mut instances = Vec::new();
     let mut warps = Vec::new();
     let pb = cli::bar(4 * episodes as u64, "episodes");
     for i in 0..episodes {
@@ -220,6 +222,13 @@ fn generate(
             "human": format!("{}.mp4", stem.replace("{}", "human")),
             "robot": format!("{}.mp4", stem.replace("{}", "robot")),
         }));
+        // The instance itself, so a policy can be evaluated on exactly what it trained on
+        // (`milv-train eval --instances`).
+        instances.push(serde_json::json!({
+            "index": i,
+            "robot": format!("{}.mp4", stem.replace("{}", "robot")),
+            "task": serde_json::to_value(&task)?,
+        }));
         // Loosely paired clips: the same motion at different speeds and lengths.
         let robot_len = rng.random_range(36..=51);
         let pair = paired_clips(&task, size, 51, robot_len, &mut rng).context("empty task")?;
@@ -251,6 +260,7 @@ fn generate(
     let jsonl = |rows: &[serde_json::Value]| rows.iter().map(|r| r.to_string() + "\n").collect::<String>();
     std::fs::write(out.join("ground_truth.jsonl"), jsonl(&ground_truth))?;
     std::fs::write(out.join("warps.jsonl"), jsonl(&warps))?;
+    std::fs::write(out.join("instances.jsonl"), jsonl(&instances))?;
     let lines: Vec<String> = manifest
         .iter()
         .map(|m| serde_json::json!({"path": m["path"], "sidecar": m["sidecar"]}).to_string())

@@ -80,7 +80,7 @@ pub fn pushing_task(objects: &[ObjSpec], rng: &mut impl rand::Rng) -> Option<Tas
             break;
         }
     }
-    let pusher_start = Vec2::new(rng.random_range(5.0..55.0), rng.random_range(3.0..8.0));
+    let pusher_start = random_pusher_start(rng);
     Some(Task::Pushing {
         target: objects[ti].clone(),
         distractor: objects[di].clone(),
@@ -89,6 +89,26 @@ pub fn pushing_task(objects: &[ObjSpec], rng: &mut impl rand::Rng) -> Option<Tas
         distractor_start,
         pusher_start,
     })
+}
+
+/// Where a pushing episode's pusher starts: along the near edge of the table.
+pub fn random_pusher_start(rng: &mut impl rand::Rng) -> Vec2 {
+    Vec2::new(rng.random_range(5.0..55.0), rng.random_range(3.0..8.0))
+}
+
+/// Another start position for the same instance (evaluating a policy on an instance it
+/// trained on, the ladder's R0): drawing puts the pen 1–2 cm off the guide's first point
+/// (the guide stays), pushing redraws the pusher's start as [`pushing_task`] does. Pass
+/// it to [`Sim::start_at`]; the objects and the goal do not move.
+pub fn another_start(task: &Task, rng: &mut impl rand::Rng) -> Vec2 {
+    match task {
+        Task::Drawing { shape } => {
+            let first = shape.path.first().copied().unwrap_or(Vec2::ZERO);
+            let a = rng.random_range(0.0..std::f32::consts::TAU);
+            clamp_to_workspace(first + Vec2::from_angle(a) * rng.random_range(1.0..2.0))
+        }
+        Task::Pushing { .. } => random_pusher_start(rng),
+    }
 }
 
 impl Task {
@@ -154,6 +174,18 @@ impl Sim {
             steps: 0,
             world,
         })
+    }
+
+    /// The episode with the end-effector (pen or pusher) starting at `p` instead of the
+    /// task's start point; call it before the first step.
+    pub fn start_at(mut self, p: Vec2) -> Sim {
+        let p = clamp_to_workspace(p);
+        if let Some(w) = &mut self.world {
+            w.pusher = p;
+        }
+        self.ee = p;
+        self.trace = vec![p];
+        self
     }
 
     pub fn task(&self) -> &Task {
@@ -544,6 +576,35 @@ mod tests {
             "expert succeeded on {ok}/{}",
             all.len()
         );
+    }
+
+    #[test]
+    fn the_expert_succeeds_from_other_start_positions() {
+        use rand::SeedableRng;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let (train, _) = push::object_catalog();
+        let mut tasks: Vec<Task> = shapes::training_shapes()
+            .into_iter()
+            .map(|shape| Task::Drawing { shape })
+            .collect();
+        tasks.extend((0..6).filter_map(|_| pushing_task(&train, &mut rng)));
+        let (mut ok, mut n) = (0, 0);
+        for task in &tasks {
+            for _ in 0..3 {
+                let start = another_start(task, &mut rng);
+                let sim = Sim::reset(task.clone(), Domain::Robot, 32)
+                    .unwrap()
+                    .start_at(start);
+                assert_eq!(sim.end_effector(), start);
+                if let Task::Drawing { shape } = task {
+                    let d = start.dist(shape.path[0]);
+                    assert!((0.99..=2.01).contains(&d), "pen started {d} cm off the guide");
+                }
+                ok += usize::from(rollout(sim, expert_action).success);
+                n += 1;
+            }
+        }
+        assert!(ok * 100 >= n * 90, "expert succeeded from {ok}/{n} other starts");
     }
 
     #[test]

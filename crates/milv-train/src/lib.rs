@@ -27,6 +27,9 @@ pub enum Error {
     Dataset(#[from] milv_data::Error),
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),
+    /// Encoding or decoding evaluation frames.
+    #[error(transparent)]
+    Video(#[from] milv_video::Error),
     /// The data cannot be trained on or evaluated as asked.
     #[error("{0}")]
     Data(String),

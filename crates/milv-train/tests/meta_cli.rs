@@ -325,6 +325,54 @@ fn daml_inner_loop_flags_visibility_and_evaluation_options() {
         );
         assert_eq!(ev["per_task"].as_array().unwrap().len(), tasks, "{split}");
     }
+    // --instances: the fixture's own instances (what the policy trained on), each from two
+    // other start positions; a file of the wrong family is refused, naming it.
+    let inst = dir.path().join("instances.jsonl");
+    let rows: String = milv_sim::shapes::training_shapes()[..3]
+        .iter()
+        .enumerate()
+        .map(|(i, sh)| {
+            let task = milv_sim::env::Task::Drawing { shape: sh.clone() };
+            serde_json::json!({"index": i, "task": task}).to_string() + "\n"
+        })
+        .collect();
+    std::fs::write(&inst, rows).unwrap();
+    let ev = json(&[
+        "eval",
+        s(&out),
+        "--instances",
+        s(&inst),
+        "--trials",
+        "2",
+        "--threads",
+        "1",
+        "--json",
+    ]);
+    assert_eq!(ev["instances"].as_str(), Some(s(&inst)));
+    assert_eq!(
+        ev["frames"], "h264",
+        "evaluation frames pass the training codec by default"
+    );
+    assert_eq!(
+        (ev["trials"].as_u64(), ev["per_task"].as_array().unwrap().len()),
+        (Some(6), 3)
+    );
+    assert!(ev["loss_pre"].as_f64().unwrap() > 0.0, "{ev}");
+    let (code, _, err) = run(&[
+        "eval",
+        s(&out),
+        "--instances",
+        s(&inst),
+        "--family",
+        "pushing",
+        "--trials",
+        "1",
+    ]);
+    assert_eq!(code, 1);
+    assert!(
+        err.contains("instances.jsonl line 1: a drawing instance"),
+        "{err}"
+    );
     let charts = dir.path().join("charts");
     let (code, stdout, err) = run(&[
         "report",
@@ -383,6 +431,57 @@ fn daml_inner_loop_flags_visibility_and_evaluation_options() {
         "--tiny",
     ]);
     assert_eq!(code, 1, "resuming a robot → robot run as human → robot must fail");
+    assert!(err.contains("the data changed"), "{err}");
+    // --state: the robot's state as an extra input, standardised, recorded in the policy
+    // and in the eval report; resuming without it is refused.
+    let st = dir.path().join("daml-state");
+    let mut args = vec![
+        "meta",
+        ds,
+        "--variant",
+        "daml",
+        "--state",
+        "--out",
+        s(&st),
+        "--steps",
+        "2",
+    ];
+    args.extend(TINY);
+    args.push("2");
+    let rep = json(&args);
+    let ckpt = PathBuf::from(rep["checkpoint"].as_str().unwrap());
+    let meta: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(ckpt.join("policy.json")).unwrap()).unwrap();
+    assert_eq!(meta["policy"]["state_dim"], 2);
+    let norm = meta["policy"]["state_norm"].as_array().unwrap();
+    assert_eq!(norm.len(), 2);
+    assert!(norm.iter().all(|m| m[1].as_f64().unwrap() > 0.1), "{norm:?}");
+    let ev = json(&[
+        "eval",
+        s(&st),
+        "--trials",
+        "1",
+        "--split",
+        "train",
+        "--threads",
+        "1",
+        "--json",
+    ]);
+    assert_eq!(ev["state_input"], true);
+    assert!(ev["loss_pre"].as_f64().unwrap() > 0.0);
+    let (code, _, err) = run(&[
+        "meta",
+        ds,
+        "--variant",
+        "daml",
+        "--out",
+        s(&st),
+        "--resume",
+        "--steps",
+        "3",
+        "--tiny",
+    ]);
+    assert_eq!(code, 1, "resuming a --state run without --state must fail");
     assert!(err.contains("the data changed"), "{err}");
     let (code, _, err) = run(&[
         "meta",

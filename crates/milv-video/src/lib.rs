@@ -14,6 +14,8 @@
 //! - [`Resample`] (`resample.rs`): fps resampling as an iterator adapter (drop/repeat frames).
 //! - [`VideoWriter`] (`writer.rs`): encodes RGB24 frames to H.264/VP9/AV1/MJPEG, for samples
 //!   and tests.
+//! - [`roundtrip`] (`roundtrip.rs`): frames through a codec and back (what a learner trained
+//!   on encoded video sees at evaluation).
 //! - `scaler.rs`: a per-thread cache of swscale contexts (they are not `Send`; readers are).
 //!
 //! Colour conversion uses swscale's defaults (BT.601 matrix, range from the pixel format).
@@ -28,6 +30,7 @@ mod fit;
 mod frames_dir;
 mod reader;
 mod resample;
+mod roundtrip;
 mod scaler;
 mod types;
 mod writer;
@@ -40,6 +43,7 @@ pub use fit::{Plan, fit_plan};
 pub use frames_dir::{FrameDirReader, list_numbered_frames};
 pub use reader::VideoReader;
 pub use resample::Resample;
+pub use roundtrip::roundtrip;
 pub use types::{AspectPolicy, DecodeOptions, Frame, Resize, VideoInfo};
 pub use writer::{Codec, VideoWriter};
 

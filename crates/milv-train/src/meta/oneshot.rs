@@ -8,7 +8,9 @@
 //! Trial instances: drawing places the test shape at a random offset (the same place in
 //! the demo and the execution); pushing draws a layout for the test object and then, for
 //! the execution, swaps the distractor for another test object, as the paper's protocol
-//! asks. Everything is seeded by `(seed, task, trial)`.
+//! asks. Everything is seeded by `(seed, task, trial)`. Diagnostics: `split` Train runs the
+//! training shapes / objects at fresh positions, [`Instances`] runs instances listed in a
+//! file (those a policy trained on) from other start positions of the end-effector.
 //!
 //! The loop is written against [`OneShot`], so the scripted oracle ([`Oracle`]) runs
 //! through exactly the code a trained policy ([`PolicyLearner`]) does.
@@ -19,7 +21,7 @@ use tch::nn::Module;
 use tch::{Device, Tensor};
 
 use milv_sim::Vec2;
-use milv_sim::env::{Sim, Task, expert_action, pushing_task, rollout, swap_distractor};
+use milv_sim::env::{Sim, Task, another_start, expert_action, pushing_task, rollout, swap_distractor};
 use milv_sim::push::object_catalog;
 use milv_sim::render::Domain;
 use milv_sim::shapes::{Shape, test_shapes, training_shapes};
@@ -34,12 +36,18 @@ pub trait OneShot {
     /// Adapts to one human demonstration (RGB24 frames).
     fn adapt(&mut self, demo: &[Vec<u8>]) -> Result<()>;
     /// The action for the current robot frame (RGB24). `sim` is there for privileged
-    /// oracles; a learned policy reads only `frame`.
+    /// oracles; a learned policy reads only `frame` (and, trained with `--state`, the
+    /// robot's own end-effector position, [`Sim::state`]).
     fn act(&mut self, sim: &Sim, frame: &[u8]) -> Result<Vec2>;
     /// The imitation loss (the outer loss's units) of the policy before and after the last
-    /// adaptation, on robot `frames` whose expert actions are `actions`; None for a
-    /// learner without parameters (the oracle).
-    fn imitation_loss(&mut self, _frames: &[Vec<u8>], _actions: &[[f32; 2]]) -> Result<Option<[f64; 2]>> {
+    /// adaptation, on robot `frames` (robot `states`) whose expert actions are `actions`;
+    /// None for a learner without parameters (the oracle).
+    fn imitation_loss(
+        &mut self,
+        _frames: &[Vec<u8>],
+        _states: &[[f32; 2]],
+        _actions: &[[f32; 2]],
+    ) -> Result<Option<[f64; 2]>> {
         Ok(None)
     }
 }
@@ -212,6 +220,84 @@ pub fn trial_tasks_of(
     }
 }
 
+/// How the evaluator's rendered frames reach the learner.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EvalFrames {
+    /// As rendered (what reports from before the choice used).
+    #[default]
+    Raw,
+    /// Through the codec milv-sim gen writes training videos with (H.264, CRF 18, 4:2:0),
+    /// so a policy meets the artefacts it trained on: each demo as one stream, each
+    /// execution frame as its own one-frame stream (an intra frame: the policy must act
+    /// before the later frames exist).
+    H264,
+}
+
+impl EvalFrames {
+    pub fn name(self) -> &'static str {
+        match self {
+            EvalFrames::Raw => "raw",
+            EvalFrames::H264 => "h264",
+        }
+    }
+}
+
+impl std::str::FromStr for EvalFrames {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "raw" => Ok(EvalFrames::Raw),
+            "h264" => Ok(EvalFrames::H264),
+            _ => Err(format!("unknown frame codec {s:?} (raw | h264)")),
+        }
+    }
+}
+
+/// Applies [`EvalFrames`]; the scratch videos live in a temporary folder.
+struct FramePipe {
+    dir: Option<tempfile::TempDir>,
+    size: u32,
+}
+
+impl FramePipe {
+    /// The rate milv-sim gen writes its videos at (the codec's rate control sees it).
+    const FPS: u32 = 10;
+
+    fn new(kind: EvalFrames, size: u32) -> Result<FramePipe> {
+        let dir = match kind {
+            EvalFrames::Raw => None,
+            EvalFrames::H264 => Some(tempfile::tempdir().map_err(|source| Error::Io {
+                op: "creating a scratch folder for evaluation videos",
+                source,
+                path: std::env::temp_dir(),
+            })?),
+        };
+        Ok(FramePipe { dir, size })
+    }
+
+    fn clip(&self, frames: Vec<Vec<u8>>) -> Result<Vec<Vec<u8>>> {
+        match &self.dir {
+            None => Ok(frames),
+            Some(d) => Ok(milv_video::roundtrip(
+                &d.path().join("clip.mp4"),
+                &frames,
+                self.size,
+                self.size,
+                Self::FPS,
+                milv_video::Codec::H264,
+            )?),
+        }
+    }
+
+    fn frame(&self, frame: Vec<u8>) -> Result<Vec<u8>> {
+        match &self.dir {
+            None => Ok(frame),
+            Some(_) => Ok(self.clip(vec![frame])?.pop().unwrap_or_default()),
+        }
+    }
+}
+
 /// What to run.
 #[derive(Clone, Debug)]
 pub struct EvalOptions {
@@ -225,6 +311,11 @@ pub struct EvalOptions {
     pub demo: DemoSource,
     /// Who performs the demonstration: a human (the protocol) or the robot.
     pub demo_domain: milv_data::Domain,
+    /// Evaluate on these instances (from other start positions) instead of `split`'s
+    /// tasks at fresh positions.
+    pub instances: Option<Instances>,
+    /// Frames as rendered, or through the training videos' codec.
+    pub frames: EvalFrames,
 }
 
 /// Outcomes of one held-out task.
@@ -237,6 +328,10 @@ pub struct TaskOutcome {
     pub wrong_object: usize,
     /// Other failures.
     pub control: usize,
+    /// Drawing: each trial's LCS score out of 50 (success from milv-sim's `SUCCESS_LCS`), so
+    /// a near miss reads apart from a policy that never finds the line.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub scores: Vec<usize>,
 }
 
 /// Success of one learner on one task family.
@@ -261,6 +356,12 @@ pub struct FamilyResult {
     /// Who performed the demonstrations.
     #[serde(default = "human_domain")]
     pub demo_domain: milv_data::Domain,
+    /// The instances file evaluated on instead of the split's tasks (`--instances`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub instances: Option<String>,
+    /// How the frames reached the learner (older reports: raw).
+    #[serde(default)]
+    pub frames: EvalFrames,
     /// Mean imitation loss over the trials before (θ) and after (θ′) adapting on the demo,
     /// on the expert's rollout of each trial's execution instance: how much the inner step
     /// helps on the instances evaluated (absent for the oracle and older reports).
@@ -291,67 +392,180 @@ pub fn wilson95(k: usize, n: usize) -> [f64; 2] {
     [lo, hi]
 }
 
+/// Task instances read from milv-sim's `instances.jsonl` (`milv-sim gen` writes one row
+/// per generated instance): evaluating on them from other start positions asks whether the
+/// policy reproduces what it trained on (the ladder's R0).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Instances {
+    /// Where they were read from (recorded in the report).
+    pub source: String,
+    pub tasks: Vec<Task>,
+}
+
+#[derive(Deserialize)]
+struct InstanceRow {
+    task: Task,
+}
+
+impl Instances {
+    /// Reads `instances.jsonl`; every instance must be of `family`.
+    pub fn load(path: &std::path::Path, family: Family) -> Result<Instances> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
+            op: "reading the instances",
+            source,
+            path: path.to_path_buf(),
+        })?;
+        let mut tasks = Vec::new();
+        for (i, line) in text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
+            let row: InstanceRow = serde_json::from_str(line).map_err(|e| {
+                Error::Data(format!("{} line {}: not an instance: {e}", path.display(), i + 1))
+            })?;
+            if row.task.family() != family.name() {
+                return Err(Error::Data(format!(
+                    "{} line {}: a {} instance, but the evaluation is on {}",
+                    path.display(),
+                    i + 1,
+                    row.task.family(),
+                    family.name()
+                )));
+            }
+            tasks.push(row.task);
+        }
+        if tasks.is_empty() {
+            return Err(Error::Data(format!("{}: no instances", path.display())));
+        }
+        Ok(Instances {
+            source: path.display().to_string(),
+            tasks,
+        })
+    }
+}
+
+/// One trial: the instance demonstrated, the instance executed, and where the execution's
+/// end-effector starts (None: the instance's own start point).
+struct Trial {
+    demo: Task,
+    exec: Task,
+    start: Option<Vec2>,
+}
+
+/// The trials of every task (name, trials), in the order they run.
+fn trial_plan(opts: &EvalOptions) -> Result<Vec<(String, Vec<Trial>)>> {
+    let mut plan = Vec::new();
+    if let Some(inst) = &opts.instances {
+        // Each listed instance from `trials` other start positions per seed; a swapped
+        // demo is the next listed instance's.
+        let n = inst.tasks.len();
+        for (k, task) in inst.tasks.iter().enumerate() {
+            let mut trials = Vec::new();
+            for &seed in &opts.seeds {
+                for trial in 0..opts.trials {
+                    let mut rng = StdRng::seed_from_u64(
+                        seed.wrapping_mul(0xD1B5_4A32_D192_ED03) ^ ((k as u64) << 32) ^ trial as u64,
+                    );
+                    let demo = match opts.demo {
+                        DemoSource::Own => task.clone(),
+                        DemoSource::Swap => inst.tasks[(k + 1) % n].clone(),
+                    };
+                    let start = Some(another_start(task, &mut rng));
+                    trials.push(Trial {
+                        demo,
+                        exec: task.clone(),
+                        start,
+                    });
+                }
+            }
+            plan.push((format!("{}#{k}", task.id()), trials));
+        }
+        return Ok(plan);
+    }
+    let names = opts.family.tasks_of(opts.split);
+    for (k, name) in names.iter().enumerate() {
+        let mut trials = Vec::new();
+        for &seed in &opts.seeds {
+            for trial in 0..opts.trials {
+                let (own_demo, exec) = trial_tasks_of(opts.family, opts.split, k, seed, trial)?;
+                let demo = match opts.demo {
+                    DemoSource::Own => own_demo,
+                    DemoSource::Swap => {
+                        trial_tasks_of(opts.family, opts.split, (k + 1) % names.len(), seed, trial)?.0
+                    }
+                };
+                trials.push(Trial {
+                    demo,
+                    exec,
+                    start: None,
+                });
+            }
+        }
+        plan.push((name.clone(), trials));
+    }
+    Ok(plan)
+}
+
 /// Runs the protocol; `progress(done, total)` after every trial.
 pub fn evaluate_one_shot(
     learner: &mut dyn OneShot,
     opts: &EvalOptions,
     progress: &mut dyn FnMut(usize, usize),
 ) -> Result<FamilyResult> {
-    let names = opts.family.tasks_of(opts.split);
-    let total = names.len() * opts.seeds.len() * opts.trials;
+    let plan = trial_plan(opts)?;
+    let total = plan.iter().map(|(_, t)| t.len()).sum();
     let mut done = 0;
-    let mut per_task = Vec::with_capacity(names.len());
+    let mut per_task = Vec::with_capacity(plan.len());
     let (mut pre, mut post, mut measured) = (0.0, 0.0, 0usize);
-    for (k, name) in names.iter().enumerate() {
+    let pipe = FramePipe::new(opts.frames, opts.image_size)?;
+    let who = match opts.demo_domain {
+        milv_data::Domain::Human => Domain::Human,
+        milv_data::Domain::Robot => Domain::Robot,
+    };
+    for (name, trials) in plan {
         let mut o = TaskOutcome {
             task: name.clone(),
             ..TaskOutcome::default()
         };
-        for &seed in &opts.seeds {
-            for trial in 0..opts.trials {
-                let (own_demo, exec_task) = trial_tasks_of(opts.family, opts.split, k, seed, trial)?;
-                let demo_task = match opts.demo {
-                    DemoSource::Own => own_demo,
-                    DemoSource::Swap => {
-                        trial_tasks_of(opts.family, opts.split, (k + 1) % names.len(), seed, trial)?.0
-                    }
-                };
-                let empty = || Error::Config(format!("task {name}: empty instance"));
-                let who = match opts.demo_domain {
-                    milv_data::Domain::Human => Domain::Human,
-                    milv_data::Domain::Robot => Domain::Robot,
-                };
-                let demo = rollout(
-                    Sim::reset(demo_task, who, opts.image_size).ok_or_else(empty)?,
-                    expert_action,
-                );
-                learner.adapt(&demo.frames)?;
-                let expert = rollout(
-                    Sim::reset(exec_task.clone(), Domain::Robot, opts.image_size).ok_or_else(empty)?,
-                    expert_action,
-                );
-                // The last frame's action is a placeholder (no step follows it).
-                let n = expert.frames.len().saturating_sub(1);
-                if let Some([a, b]) = learner.imitation_loss(&expert.frames[..n], &expert.actions[..n])? {
-                    (pre, post, measured) = (pre + a, post + b, measured + 1);
-                }
-                let mut sim = Sim::reset(exec_task, Domain::Robot, opts.image_size).ok_or_else(empty)?;
-                while !sim.done() {
-                    let frame = sim.observe();
-                    let a = learner.act(&sim, &frame)?;
-                    sim.step(a);
-                }
-                o.trials += 1;
-                if sim.success() {
-                    o.successes += 1;
-                } else if opts.family == Family::Pushing && sim.distractor_moved() {
-                    o.wrong_object += 1;
-                } else {
-                    o.control += 1;
-                }
-                done += 1;
-                progress(done, total);
+        let empty = || Error::Config(format!("task {name}: empty instance"));
+        for Trial { demo, exec, start } in trials {
+            let demo = rollout(
+                Sim::reset(demo, who, opts.image_size).ok_or_else(empty)?,
+                expert_action,
+            );
+            learner.adapt(&pipe.clip(demo.frames)?)?;
+            let reset = || -> Result<Sim> {
+                let sim = Sim::reset(exec.clone(), Domain::Robot, opts.image_size).ok_or_else(empty)?;
+                Ok(match start {
+                    Some(p) => sim.start_at(p),
+                    None => sim,
+                })
+            };
+            let expert = rollout(reset()?, expert_action);
+            let expert_frames = pipe.clip(expert.frames)?;
+            // The last frame's action is a placeholder (no step follows it).
+            let n = expert_frames.len().saturating_sub(1);
+            if let Some([a, b]) =
+                learner.imitation_loss(&expert_frames[..n], &expert.states[..n], &expert.actions[..n])?
+            {
+                (pre, post, measured) = (pre + a, post + b, measured + 1);
             }
+            let mut sim = reset()?;
+            while !sim.done() {
+                let frame = pipe.frame(sim.observe())?;
+                let a = learner.act(&sim, &frame)?;
+                sim.step(a);
+            }
+            o.trials += 1;
+            if opts.family == Family::Drawing {
+                o.scores.push(sim.score());
+            }
+            if sim.success() {
+                o.successes += 1;
+            } else if opts.family == Family::Pushing && sim.distractor_moved() {
+                o.wrong_object += 1;
+            } else {
+                o.control += 1;
+            }
+            done += 1;
+            progress(done, total);
         }
         per_task.push(o);
     }
@@ -367,9 +581,15 @@ pub fn evaluate_one_shot(
         control: sum(|t| t.control),
         seeds: opts.seeds.clone(),
         trials_per_task: opts.trials * opts.seeds.len(),
-        split: opts.split,
+        split: if opts.instances.is_some() {
+            EvalSplit::Train
+        } else {
+            opts.split
+        },
         demo: opts.demo,
         demo_domain: opts.demo_domain,
+        instances: opts.instances.as_ref().map(|i| i.source.clone()),
+        frames: opts.frames,
         loss_pre: (measured > 0).then(|| pre / measured as f64),
         loss_post: (measured > 0).then(|| post / measured as f64),
         per_task,
@@ -428,6 +648,24 @@ impl PolicyLearner {
             .to_device(self.device())
     }
 
+    /// Robot states `[T, S]` standardised as in training, for a policy with a state input.
+    fn states(&self, states: &[[f32; 2]]) -> Option<Tensor> {
+        let norm = &self.net.cfg.state_norm;
+        (self.net.cfg.state_dim > 0).then(|| {
+            let flat: Vec<f32> = states
+                .iter()
+                .flat_map(|s| {
+                    s.iter()
+                        .zip(norm)
+                        .map(|(&x, [m, sd])| ((f64::from(x) - m) / sd) as f32)
+                })
+                .collect();
+            Tensor::from_slice(&flat)
+                .view([states.len() as i64, norm.len() as i64])
+                .to_device(self.device())
+        })
+    }
+
     /// Robot frames as the policy reads them: images, or F's latents of them.
     fn observations(&self, frames: &[&[u8]]) -> Tensor {
         let y = self.images(frames);
@@ -461,13 +699,14 @@ impl OneShot for PolicyLearner {
         Ok(())
     }
 
-    fn act(&mut self, _sim: &Sim, frame: &[u8]) -> Result<Vec2> {
+    fn act(&mut self, sim: &Sim, frame: &[u8]) -> Result<Vec2> {
         let th = self
             .adapted
             .as_ref()
             .ok_or_else(|| Error::Config("act before adapt".into()))?;
         let obs = self.observations(&[frame]);
-        let a = tch::no_grad(|| self.net.act(th, &obs));
+        let state = self.states(&[sim.state()]);
+        let a = tch::no_grad(|| self.net.act_with(th, &obs, state.as_ref()));
         let s = self.net.cfg.action_scale;
         let v: Vec<f32> = Vec::try_from(a.to_device(Device::Cpu).contiguous().view([-1]))?;
         Ok(Vec2::new(
@@ -476,7 +715,12 @@ impl OneShot for PolicyLearner {
         ))
     }
 
-    fn imitation_loss(&mut self, frames: &[Vec<u8>], actions: &[[f32; 2]]) -> Result<Option<[f64; 2]>> {
+    fn imitation_loss(
+        &mut self,
+        frames: &[Vec<u8>],
+        states: &[[f32; 2]],
+        actions: &[[f32; 2]],
+    ) -> Result<Option<[f64; 2]>> {
         let th = self
             .adapted
             .as_ref()
@@ -487,8 +731,13 @@ impl OneShot for PolicyLearner {
         let flat: Vec<f32> = actions.iter().flat_map(|a| a.map(|x| x / scale)).collect();
         let target = Tensor::from_slice(&flat).view([-1, 2]).to_device(self.device());
         let ones = Tensor::ones([target.size()[0]], (tch::Kind::Float, self.device()));
+        let state = self.states(states);
         let loss = |params: &[Tensor]| -> f64 {
-            tch::no_grad(|| self.net.bc_loss(params, &obs, &target, &ones)).double_value(&[])
+            tch::no_grad(|| {
+                self.net
+                    .bc_loss_with(params, &obs, state.as_ref(), &target, &ones)
+            })
+            .double_value(&[])
         };
         Ok(Some([loss(&self.net.theta), loss(th)]))
     }
@@ -503,6 +752,10 @@ pub struct EvalRecord {
     pub dataset_version: u64,
     pub translator_model: Option<String>,
     pub meta_steps: u64,
+    /// The policy also read the robot's end-effector state (`meta --state`): not the
+    /// paper's image-only policy, and its table row says so.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub state_input: bool,
     #[serde(flatten)]
     pub result: FamilyResult,
 }
@@ -543,7 +796,12 @@ pub fn tables_markdown(records: &[EvalRecord]) -> String {
             })
             .next()
             .unwrap_or("");
-        s += &format!("| {}{note} |", v.label());
+        let state = if records.iter().any(|r| r.variant == *v && r.state_input) {
+            " (+ robot state input)"
+        } else {
+            ""
+        };
+        s += &format!("| {}{note}{state} |", v.label());
         for f in &fams {
             s += &match find(*v, *f) {
                 Some(r) => {
@@ -640,6 +898,8 @@ mod tests {
                 split: EvalSplit::Test,
                 demo: DemoSource::Own,
                 demo_domain: milv_data::Domain::Human,
+                instances: None,
+                frames: EvalFrames::Raw,
             };
             let got = evaluate_one_shot(&mut Oracle, &opts, &mut |_, _| {}).unwrap();
             let mut expert = 0;
@@ -686,9 +946,10 @@ mod tests {
         }
     }
 
-    /// Records the demonstrations it is shown; acts like the expert.
+    /// Records the demonstrations it is shown (their last frames) and where each execution
+    /// starts; acts like the expert.
     #[derive(Default)]
-    struct Recorder(Vec<Vec<u8>>);
+    struct Recorder(Vec<Vec<u8>>, Vec<Vec2>);
 
     impl OneShot for Recorder {
         fn adapt(&mut self, demo: &[Vec<u8>]) -> Result<()> {
@@ -696,6 +957,9 @@ mod tests {
             Ok(())
         }
         fn act(&mut self, sim: &Sim, _frame: &[u8]) -> Result<Vec2> {
+            if sim.steps() == 0 {
+                self.1.push(sim.end_effector());
+            }
             Ok(expert_action(sim))
         }
     }
@@ -714,6 +978,8 @@ mod tests {
                 split,
                 demo,
                 demo_domain: milv_data::Domain::Human,
+                instances: None,
+                frames: EvalFrames::Raw,
             };
             let res = evaluate_one_shot(&mut r, &opts, &mut |_, _| {}).unwrap();
             (r.0, res)
@@ -733,5 +999,130 @@ mod tests {
         assert_eq!(train.len(), Family::Drawing.tasks_of(EvalSplit::Train).len());
         assert_eq!(res.split, EvalSplit::Train);
         assert_eq!(res.per_task[0].task, training_shapes()[0].name);
+        assert_eq!(res.per_task[0].scores.len(), 1);
+        let ok = res
+            .per_task
+            .iter()
+            .flat_map(|t| &t.scores)
+            .filter(|&&s| s >= milv_sim::shapes::SUCCESS_LCS);
+        assert_eq!(ok.count(), res.successes, "scores and successes disagree");
+    }
+
+    /// `--instances`: each listed instance runs from `trials` other start positions per
+    /// seed, adapting on that instance's own demo (or the next one's with swap); the
+    /// file's bad rows are refused with the file and line named.
+    #[test]
+    fn listed_instances_run_from_other_start_positions_on_their_own_demo() {
+        let mut rng = StdRng::seed_from_u64(4);
+        let (train, _) = object_catalog();
+        let drawing: Vec<Task> = training_shapes()[..2]
+            .iter()
+            .map(|s| Task::Drawing { shape: s.clone() })
+            .collect();
+        let pushing: Vec<Task> = (0..2).filter_map(|_| pushing_task(&train, &mut rng)).collect();
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("instances.jsonl");
+        for (family, tasks) in [(Family::Drawing, drawing), (Family::Pushing, pushing)] {
+            let rows: String = tasks
+                .iter()
+                .enumerate()
+                .map(|(i, t)| serde_json::json!({"index": i, "task": t}).to_string() + "\n")
+                .collect();
+            std::fs::write(&file, rows).unwrap();
+            let inst = Instances::load(&file, family).unwrap();
+            assert_eq!(inst.tasks, tasks);
+            let other = if family == Family::Drawing {
+                Family::Pushing
+            } else {
+                Family::Drawing
+            };
+            let e = Instances::load(&file, other).unwrap_err().to_string();
+            assert!(e.contains("instances.jsonl line 1"), "{e}");
+            let run = |demo| {
+                let mut r = Recorder::default();
+                let opts = EvalOptions {
+                    family,
+                    trials: 3,
+                    seeds: vec![0],
+                    image_size: 32,
+                    split: EvalSplit::Test,
+                    demo,
+                    demo_domain: milv_data::Domain::Robot,
+                    instances: Some(inst.clone()),
+                    frames: EvalFrames::Raw,
+                };
+                let res = evaluate_one_shot(&mut r, &opts, &mut |_, _| {}).unwrap();
+                (r.0, r.1, res)
+            };
+            let (own, starts, res) = run(DemoSource::Own);
+            let (swapped, _, _) = run(DemoSource::Swap);
+            assert_eq!(res.trials, 6);
+            assert_eq!(res.split, EvalSplit::Train);
+            assert_eq!(res.instances.as_deref(), Some(inst.source.as_str()));
+            assert_eq!(res.per_task[1].task, format!("{}#1", tasks[1].id()));
+            // The expert acts from every start; it must still succeed almost always.
+            assert!(res.successes >= 5, "{family:?}: {}/6", res.successes);
+            let demo_of = |t: &Task| {
+                rollout(Sim::reset(t.clone(), Domain::Robot, 32).unwrap(), expert_action)
+                    .frames
+                    .last()
+                    .cloned()
+                    .unwrap()
+            };
+            assert_eq!(own[0], demo_of(&tasks[0]));
+            assert_eq!(own[3], demo_of(&tasks[1]));
+            assert_eq!(swapped[0], demo_of(&tasks[1]));
+            // Three different start positions of instance 0, none its own start point.
+            let own_start = Sim::reset(tasks[0].clone(), Domain::Robot, 32)
+                .unwrap()
+                .end_effector();
+            assert_eq!(starts.len(), 6);
+            assert!(starts[0] != starts[1] && starts[1] != starts[2] && starts[0] != starts[2]);
+            assert!(starts[..3].iter().all(|&p| p != own_start));
+        }
+        std::fs::write(&file, "{\"task\": 3}\n").unwrap();
+        let e = Instances::load(&file, Family::Drawing).unwrap_err().to_string();
+        assert!(e.contains("line 1: not an instance"), "{e}");
+    }
+
+    /// `--frames h264`: the learner sees the demo through the training videos' codec —
+    /// close to the render, not equal to it.
+    #[test]
+    fn h264_frames_reach_the_learner_encoded() {
+        let task = Task::Drawing {
+            shape: training_shapes()[0].clone(),
+        };
+        let inst = Instances {
+            source: "mem".into(),
+            tasks: vec![task],
+        };
+        let run = |frames| {
+            let mut r = Recorder::default();
+            let opts = EvalOptions {
+                family: Family::Drawing,
+                trials: 1,
+                seeds: vec![0],
+                image_size: 32,
+                split: EvalSplit::Train,
+                demo: DemoSource::Own,
+                demo_domain: milv_data::Domain::Human,
+                instances: Some(inst.clone()),
+                frames,
+            };
+            let res = evaluate_one_shot(&mut r, &opts, &mut |_, _| {}).unwrap();
+            (r.0, res)
+        };
+        let (raw, _) = run(EvalFrames::Raw);
+        let (enc, res) = run(EvalFrames::H264);
+        assert_eq!(res.frames, EvalFrames::H264);
+        assert_eq!(res.successes, 1, "the expert ignores the frames");
+        assert_eq!(raw[0].len(), enc[0].len());
+        let mad = raw[0]
+            .iter()
+            .zip(&enc[0])
+            .map(|(&a, &b)| (f64::from(a) - f64::from(b)).abs())
+            .sum::<f64>()
+            / raw[0].len() as f64;
+        assert!(mad > 0.0 && mad < 10.0, "mean |raw - h264| {mad}");
     }
 }

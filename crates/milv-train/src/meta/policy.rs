@@ -158,6 +158,10 @@ pub struct PolicyConfig {
     /// paper's policy).
     #[serde(default)]
     pub state_dim: i64,
+    /// Mean and standard deviation of each state component (cm): the state input is
+    /// standardised with them in training and at evaluation.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub state_norm: Vec<[f64; 2]>,
 }
 
 fn one() -> f64 {
@@ -188,6 +192,7 @@ impl PolicyConfig {
             bias_dim: 20,
             layer_norm: true,
             state_dim: 0,
+            state_norm: Vec::new(),
         }
     }
 
@@ -223,6 +228,13 @@ impl PolicyConfig {
         }
         let positive = self.loss_multiplier > 0.0 && self.loss_multiplier.is_finite();
         let clip_ok = self.inner_clip >= 0.0 && self.inner_clip.is_finite();
+        if self.state_norm.len() as i64 != self.state_dim && !self.state_norm.is_empty() {
+            return Err(Error::Config(format!(
+                "state width {} but {} standardisation entries",
+                self.state_dim,
+                self.state_norm.len()
+            )));
+        }
         if !positive || !clip_ok || self.bias_dim < 0 || self.state_dim < 0 || self.hidden < 1 {
             return Err(Error::Config(format!(
                 "--loss-multiplier must be positive, --inner-clip, --bias-dim and the state width \
@@ -839,6 +851,46 @@ mod tests {
         );
         let (post0, _, pre0) = meta_objective(&net, &tasks, 0.0, true);
         assert!((post0.double_value(&[]) - pre0).abs() < 1e-12);
+    }
+
+    /// `--state`: the outer sequence's state reaches the actions (and the first hidden
+    /// layer's state columns get gradients); the inner step, a video, never reads one.
+    #[test]
+    fn a_state_input_changes_the_actions_and_gets_gradients() {
+        let _serial = crate::testing::torch_rng();
+        let cfg = PolicyConfig {
+            state_dim: 2,
+            state_norm: vec![[30.0, 10.0]; 2],
+            ..PolicyConfig::tiny(Input::Latent, [2, 6, 6], 2)
+        };
+        cfg.validate().unwrap();
+        let net = PolicyNet::new(cfg, Device::Cpu).unwrap();
+        let mut t = task(Kind::Float, 9, 11);
+        let o = (Kind::Float, Device::Cpu);
+        t.outer_state = Some(Tensor::randn([9, 2], o));
+        let a = net.act_with(&net.theta, &t.outer, t.outer_state.as_ref());
+        let b = net.act_with(
+            &net.theta,
+            &t.outer,
+            Some(&(t.outer_state.as_ref().unwrap() + 1.0)),
+        );
+        assert!(
+            (a - b).abs().max().double_value(&[]) > 0.0,
+            "the state does not reach the actions"
+        );
+        let (loss, _, _) = meta_objective(&net, std::slice::from_ref(&t), 0.1, true);
+        loss.backward();
+        let fc0 = 2 * net.cfg.strides.len() + 1;
+        let w = net.theta[fc0].grad();
+        let d = w.size()[1];
+        let g = w.narrow(1, d - 2, 2).abs().sum(Kind::Double).double_value(&[]);
+        assert!(g > 0.0, "the state columns got no gradient");
+        let bad = PolicyConfig {
+            state_dim: 2,
+            state_norm: vec![[0.0, 1.0]],
+            ..PolicyConfig::tiny(Input::Latent, [2, 6, 6], 2)
+        };
+        assert!(bad.validate().is_err());
     }
 
     impl PolicyNet {

@@ -11,7 +11,7 @@
 //! uses it for both sides. Sequences are held in memory as f32 tensors on the CPU and
 //! moved to the device per meta-batch.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 
 use milv_data::view::{EpisodeView, Image, ViewOptions, ViewPlan};
 use milv_data::{Dataset, Domain, Episode, Kind as EpisodeKind, Split, ops};
@@ -31,6 +31,9 @@ pub struct Sequence {
     pub actions: Option<Tensor>,
     /// `[T]` loss weights.
     pub weights: Tensor,
+    /// `[T, S]` robot state, standardised with [`MetaSet::state_norm`] (outer sequences,
+    /// `--state` only).
+    pub states: Option<Tensor>,
 }
 
 /// The sequences of one task: indices into [`MetaSet::seqs`].
@@ -58,6 +61,9 @@ pub struct MetaSet {
     /// near 0 means the targets are constant (e.g. an inverse-dynamics model that has not
     /// learned to tell imagined frames apart) and there is nothing to imitate.
     pub action_std: Vec<f64>,
+    /// `--state`: mean and standard deviation (cm) of each state component over the outer
+    /// sequences, the standardisation the policy's state input gets; empty without.
+    pub state_norm: Vec<[f64; 2]>,
 }
 
 /// What to read.
@@ -72,6 +78,8 @@ pub struct MetaDataOptions {
     pub score_run: Option<String>,
     /// Whose demos feed the inner step: human (every variant) or robot (DAML only).
     pub inner_domain: Domain,
+    /// Also read the robot's state along the outer (robot demo) sequences (DAML only).
+    pub with_state: bool,
 }
 
 fn decode(img: &Image, size: u32, what: &str) -> Result<Vec<f32>> {
@@ -124,6 +132,7 @@ impl MetaSet {
             digest: String::new(),
             zero_weight_frames: 0,
             action_std: Vec::new(),
+            state_norm: Vec::new(),
         };
         let mut parts: Vec<String> = vec!["milv-train/meta-data/1".into(), opts.variant.name().into()];
         if opts.inner_domain == Domain::Robot {
@@ -134,6 +143,16 @@ impl MetaSet {
                 )));
             }
             parts.push("inner=robot".into());
+        }
+        if opts.with_state {
+            if opts.variant != Variant::Daml {
+                return Err(Error::Config(format!(
+                    "--state feeds the robot's state along robot demos; variant {} trains on human \
+                     videos, which have none (DAML only)",
+                    opts.variant.name()
+                )));
+            }
+            parts.push("state".into());
         }
         match opts.variant {
             Variant::Daml if opts.inner_domain == Domain::Robot => {
@@ -155,6 +174,9 @@ impl MetaSet {
             return Err(Error::Data(format!(
                 "version {v}: no task has usable demonstrations"
             )));
+        }
+        if opts.with_state {
+            set.attach_states(ds, v)?;
         }
         parts.extend(
             ds.files(milv_data::TableKind::Frames, v)?
@@ -211,6 +233,7 @@ impl MetaSet {
                 frames: clip_tensor(&clip, size)?,
                 actions: Some(Tensor::from_slice(&acts).view([n, -1])),
                 weights: Tensor::ones([n], (tch::Kind::Float, Device::Cpu)),
+                states: None,
                 episode_id: clip.episode_id.clone(),
             };
             self.push(&task_of(&robots[&clip.episode_id]), seq, true, true);
@@ -239,6 +262,7 @@ impl MetaSet {
                 frames: tensor(&clip)?,
                 actions: None,
                 weights: Tensor::ones([n], (tch::Kind::Float, Device::Cpu)),
+                states: None,
                 episode_id: clip.episode_id.clone(),
             };
             self.push(&task_of(&humans[&clip.episode_id]), seq, true, false);
@@ -251,6 +275,7 @@ impl MetaSet {
                 frames: tensor(&clip)?,
                 actions: Some(a),
                 weights: Tensor::ones([n], (tch::Kind::Float, Device::Cpu)),
+                states: None,
                 episode_id: clip.episode_id.clone(),
             };
             let task = task_of(&robots[&clip.episode_id]);
@@ -365,9 +390,78 @@ impl MetaSet {
                 frames: Tensor::from_slice(&frames).view([n, shape[0], shape[1], shape[2]]),
                 actions: Some(Tensor::from_slice(&actions).view([n, -1])),
                 weights: Tensor::from_slice(&weights),
+                states: None,
             };
             self.push(&task_of(&view.episode), seq, true, true);
         }
+        Ok(())
+    }
+
+    /// `--state`: the robot's state along every outer sequence, standardised over them all.
+    fn attach_states(&mut self, ds: &Dataset, v: u64) -> Result<()> {
+        let outer: BTreeSet<usize> = self
+            .tasks
+            .values()
+            .flat_map(|t| t.outer.iter().copied())
+            .collect();
+        let ids: BTreeSet<String> = outer.iter().map(|&i| self.seqs[i].episode_id.clone()).collect();
+        let rows = milv_data::episode_rows(
+            ds,
+            v,
+            milv_data::TableKind::Frames,
+            &|id| ids.contains(id),
+            Some("state"),
+            None,
+        )?;
+        let mut states = BTreeMap::new();
+        for (id, r) in rows {
+            if let Some(t) = r.vectors.iter().position(Option::is_none) {
+                return Err(Error::Data(format!(
+                    "episode {id}: frame {t} has no state (--state needs the robot's state in the sidecar)"
+                )));
+            }
+            states.insert(id, r.all_vectors().unwrap_or_default());
+        }
+        let all: Vec<&Vec<f32>> = states.values().flatten().collect();
+        let dim = all.first().map_or(0, |s| s.len());
+        if dim == 0 || all.iter().any(|s| s.len() != dim) {
+            return Err(Error::Data(format!(
+                "version {v}: the robot demos' states are empty or of different widths"
+            )));
+        }
+        let n = all.len() as f64;
+        let norm: Vec<[f64; 2]> = (0..dim)
+            .map(|d| {
+                let mean = all.iter().map(|s| f64::from(s[d])).sum::<f64>() / n;
+                let var = all.iter().map(|s| (f64::from(s[d]) - mean).powi(2)).sum::<f64>() / n;
+                // A constant component carries nothing; keep it at 0 rather than divide by 0.
+                [mean, if var > 1e-12 { var.sqrt() } else { 1.0 }]
+            })
+            .collect();
+        for &i in &outer {
+            let seq = &mut self.seqs[i];
+            let rows = states
+                .get(&seq.episode_id)
+                .ok_or_else(|| Error::Data(format!("episode {}: no state rows", seq.episode_id)))?;
+            let t = seq.frames.size()[0];
+            if rows.len() as i64 != t {
+                return Err(Error::Data(format!(
+                    "episode {}: {} states for {t} frames",
+                    seq.episode_id,
+                    rows.len()
+                )));
+            }
+            let flat: Vec<f32> = rows
+                .iter()
+                .flat_map(|s| {
+                    s.iter()
+                        .zip(&norm)
+                        .map(|(&x, [m, sd])| ((f64::from(x) - m) / sd) as f32)
+                })
+                .collect();
+            seq.states = Some(Tensor::from_slice(&flat).view([t, dim as i64]));
+        }
+        self.state_norm = norm;
         Ok(())
     }
 
@@ -432,7 +526,7 @@ impl MetaSet {
                 outer: so.frames.to_device(device),
                 actions: acts.to_device(device),
                 weights: so.weights.to_device(device),
-                outer_state: None,
+                outer_state: so.states.as_ref().map(|x| x.to_device(device)),
             });
         }
         out

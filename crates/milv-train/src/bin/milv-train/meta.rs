@@ -77,6 +77,11 @@ pub struct MetaArgs {
     /// robot demo's frames, no actions — DAML's video-only robot → robot).
     #[arg(long, default_value = "human")]
     inner: milv_data::Domain,
+    /// Also feed the robot's end-effector state (the sidecar's `state`, standardised) to
+    /// the policy after the spatial softmax (DAML only; off by default: the paper's policy
+    /// is image-only, and a row trained with it says so).
+    #[arg(long)]
+    state: bool,
     /// Ground-truth human/robot demo pairs (milv-sim's ground_truth.jsonl): an imagined-data
     /// variant is refused when the translator's imagined actions correlate < 0.5 with the
     /// true robot actions. Without it, a warning when their spread is under a quarter of
@@ -122,6 +127,15 @@ pub struct EvalArgs {
     /// trained on).
     #[arg(long)]
     demo_domain: Option<milv_data::Domain>,
+    /// Evaluate on these task instances instead (milv-sim gen's instances.jsonl), each from
+    /// --trials other start positions per seed, adapting on the instance's own demo: does
+    /// the policy reproduce what it trained on? (the ladder's R0; overrides --split)
+    #[arg(long, value_name = "FILE")]
+    instances: Option<PathBuf>,
+    /// h264: the demo and every camera frame pass through the codec of the training videos
+    /// (H.264, CRF 18, 4:2:0: milv-sim gen's) before the learner sees them; raw: as rendered.
+    #[arg(long, default_value = "h264")]
+    frames: oneshot::EvalFrames,
     /// Use this A-CycleGAN checkpoint instead of the one recorded in the policy.
     #[arg(long)]
     translator: Option<PathBuf>,
@@ -222,6 +236,7 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
             image_size,
             score_run: a.score_run.clone(),
             inner_domain: a.inner,
+            with_state: a.state,
         },
     )?;
     let (seqs, frames) = set.size();
@@ -299,6 +314,8 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
                 },
                 layer_norm: !a.no_layer_norm,
                 hidden: a.hidden.unwrap_or(base.hidden),
+                state_dim: set.state_norm.len() as i64,
+                state_norm: set.state_norm.clone(),
                 ..base
             };
             policy.validate()?;
@@ -388,6 +405,9 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
 
 impl EvalArgs {
     fn split_name(&self) -> &'static str {
+        if self.instances.is_some() {
+            return "listed instances, other start positions";
+        }
         match self.split {
             EvalSplit::Train => "training",
             EvalSplit::Test => "held-out",
@@ -450,6 +470,12 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
         split: a.split,
         demo: a.demo,
         demo_domain: a.demo_domain.unwrap_or(info.meta.inner_domain),
+        instances: a
+            .instances
+            .as_deref()
+            .map(|p| oneshot::Instances::load(p, family))
+            .transpose()?,
+        frames: a.frames,
     };
     let bar = cli::bar(0, "trials");
     let result = oneshot::evaluate_one_shot(&mut learner, &opts, &mut |done, total| {
@@ -464,6 +490,7 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
         dataset_version: info.data.version,
         translator_model: info.translator.as_ref().map(|t| t.model_id.clone()),
         meta_steps: info.step,
+        state_input: learner.net.cfg.state_dim > 0,
         result,
     };
     if let Some(o) = &a.out {
@@ -474,8 +501,13 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
     } else {
         let r = &record.result;
         println!(
-            "{} on simulated {} ({} tasks, {} demos): {}/{} = {:.1} % (95 % CI {:.1}–{:.1} %) over {} tasks × {} trials",
+            "{}{} on simulated {} ({} tasks, {} demos): {}/{} = {:.1} % (95 % CI {:.1}–{:.1} %) over {} tasks × {} trials, {} frames",
             variant.label(),
+            if record.state_input {
+                " (+ robot state input)"
+            } else {
+                ""
+            },
             family.name(),
             a.split_name(),
             a.demo_name(),
@@ -485,7 +517,8 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
             100.0 * r.wilson95[0],
             100.0 * r.wilson95[1],
             r.per_task.len(),
-            r.trials_per_task
+            r.trials_per_task,
+            r.frames.name()
         );
         if family == Family::Pushing {
             println!("failures: wrong object {}, control {}", r.wrong_object, r.control);
@@ -498,7 +531,15 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
             );
         }
         for t in &r.per_task {
-            println!("  {:<24} {:>3}/{}", t.task, t.successes, t.trials);
+            if t.scores.is_empty() {
+                println!("  {:<24} {:>3}/{}", t.task, t.successes, t.trials);
+            } else {
+                // Drawing: the LCS scores say how near each miss came (success ≥ 30 of 50).
+                println!(
+                    "  {:<24} {:>3}/{}  LCS {:?}",
+                    t.task, t.successes, t.trials, t.scores
+                );
+            }
         }
     }
     Ok(cli::EXIT_OK)
