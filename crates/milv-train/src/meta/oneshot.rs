@@ -27,7 +27,7 @@ use milv_sim::render::Domain;
 use milv_sim::shapes::{Shape, test_shapes, training_shapes};
 
 use crate::gan::cyclegan::Nets;
-use crate::meta::policy::{Input, PolicyNet, Variant};
+use crate::meta::policy::{Input, PolicyNet, Variant, standardised_states};
 use crate::run::image::to_chw;
 use crate::{Error, Result};
 
@@ -651,19 +651,7 @@ impl PolicyLearner {
     /// Robot states `[T, S]` standardised as in training, for a policy with a state input.
     fn states(&self, states: &[[f32; 2]]) -> Option<Tensor> {
         let norm = &self.net.cfg.state_norm;
-        (self.net.cfg.state_dim > 0).then(|| {
-            let flat: Vec<f32> = states
-                .iter()
-                .flat_map(|s| {
-                    s.iter()
-                        .zip(norm)
-                        .map(|(&x, [m, sd])| ((f64::from(x) - m) / sd) as f32)
-                })
-                .collect();
-            Tensor::from_slice(&flat)
-                .view([states.len() as i64, norm.len() as i64])
-                .to_device(self.device())
-        })
+        (self.net.cfg.state_dim > 0).then(|| standardised_states(states, norm).to_device(self.device()))
     }
 
     /// Robot frames as the policy reads them: images, or F's latents of them.

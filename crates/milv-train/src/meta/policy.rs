@@ -164,6 +164,21 @@ pub struct PolicyConfig {
     pub state_norm: Vec<[f64; 2]>,
 }
 
+/// Robot states (one row per frame) as the state input reads them: `[T, S]`, each
+/// component standardised by its `(mean, std)` in `norm` (training and evaluation alike).
+pub fn standardised_states<S: AsRef<[f32]>>(states: &[S], norm: &[[f64; 2]]) -> Tensor {
+    let flat: Vec<f32> = states
+        .iter()
+        .flat_map(|s| {
+            s.as_ref()
+                .iter()
+                .zip(norm)
+                .map(|(&x, [m, sd])| ((f64::from(x) - m) / sd) as f32)
+        })
+        .collect();
+    Tensor::from_slice(&flat).view([states.len() as i64, norm.len() as i64])
+}
+
 fn one() -> f64 {
     1.0
 }

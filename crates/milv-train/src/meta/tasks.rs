@@ -18,7 +18,7 @@ use milv_data::{Dataset, Domain, Episode, Kind as EpisodeKind, Split, ops};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use tch::{Device, Tensor};
 
-use crate::meta::policy::{Input, MetaTask, Variant};
+use crate::meta::policy::{Input, MetaTask, Variant, standardised_states};
 use crate::run::image::{load_clips, to_chw};
 use crate::{Error, Result};
 
@@ -451,15 +451,7 @@ impl MetaSet {
                     rows.len()
                 )));
             }
-            let flat: Vec<f32> = rows
-                .iter()
-                .flat_map(|s| {
-                    s.iter()
-                        .zip(&norm)
-                        .map(|(&x, [m, sd])| ((f64::from(x) - m) / sd) as f32)
-                })
-                .collect();
-            seq.states = Some(Tensor::from_slice(&flat).view([t, dim as i64]));
+            seq.states = Some(standardised_states(rows, &norm));
         }
         self.state_norm = norm;
         Ok(())
