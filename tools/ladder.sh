@@ -16,7 +16,9 @@
 #           r3    DAML human → robot, training tasks
 #           r4    r3's policy on held-out tasks (reports in r3/)
 # Settings from the environment: EPISODES (150), SIZE (64), STEPS (1500), TRIALS per task
-# and seed (3), SEEDS (0,1), THREADS (2), MILV_BIN (target/debug). A rung whose run folder
+# and seed (3), SEEDS (0,1), THREADS (2), MILV_BIN (target/debug), META_ARGS (extra
+# `milv-train meta` flags for every rung, e.g. "--state" or "--lr 3e-4": one change per
+# --out folder, so each experiment keeps its own reports). A rung whose run folder
 # holds checkpoints resumes it (up to STEPS); every report lands in OUT/FAMILY/RUNG/.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -53,7 +55,7 @@ meta() {
   local resume=()
   ls "$F/$r/run/checkpoints"/step-* >/dev/null 2>&1 && resume=(--resume)
   "$B/milv-train" meta "${DS:-$ds}" --variant daml --out "$F/$r/run" --steps "$STEPS" \
-    --checkpoint-every 250 "${resume[@]}" "$@" "${rt[@]}" --json > "$F/$r/meta.json"
+    --checkpoint-every 250 "${resume[@]}" "$@" ${META_ARGS:-} "${rt[@]}" --json > "$F/$r/meta.json"
   field "'meta: step %d, outer loss %.4f -> %.4f after adaptation, %.4f before (first and last tenth of the steps run)' % (d['step'], d['outer_first'], d['outer_last'], d['outer_pre_last'])" < "$F/$r/meta.json"
 }
 

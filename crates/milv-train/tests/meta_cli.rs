@@ -259,8 +259,12 @@ fn daml_inner_loop_flags_visibility_and_evaluation_options() {
                 "--bias-dim",
                 "0",
                 "--no-layer-norm",
+                "--fixed-temperature",
                 "--hidden",
                 "5",
+                // Behaviour cloning (the ladder's R0/R1): no inner step at all.
+                "--alpha",
+                "0",
             ],
         ),
     ];
@@ -285,6 +289,7 @@ fn daml_inner_loop_flags_visibility_and_evaluation_options() {
                 (Some(50.0), Some(10.0))
             );
             assert_eq!(p["layer_norm"], true);
+            assert_eq!(p["learned_temperature"], true);
             assert!(p["bias_dim"].as_i64().unwrap() > 0);
         } else {
             assert_eq!(
@@ -293,6 +298,7 @@ fn daml_inner_loop_flags_visibility_and_evaluation_options() {
             );
             assert_eq!((p["bias_dim"].as_i64(), p["hidden"].as_i64()), (Some(0), Some(5)));
             assert_eq!(p["layer_norm"], false);
+            assert_eq!(p["learned_temperature"], false);
         }
         // Every step logs the outer loss after and before adaptation.
         let losses = std::fs::read_to_string(out.join("losses.jsonl")).unwrap();
@@ -302,6 +308,10 @@ fn daml_inner_loop_flags_visibility_and_evaluation_options() {
                 v["outer"].as_f64().unwrap() >= 0.0 && v["outer_pre"].as_f64().unwrap() > 0.0,
                 "{v}"
             );
+            if !flags.is_empty() {
+                let (post, pre) = (v["outer"].as_f64().unwrap(), v["outer_pre"].as_f64().unwrap());
+                assert!((post - pre).abs() <= 1e-5 * pre, "α = 0 leaves θ as it is: {v}");
+            }
         }
     }
     let out = dir.path().join("daml-defaults");

@@ -154,6 +154,12 @@ pub struct PolicyConfig {
     /// Layer norm (learned per-channel offset, no scale) after each convolution.
     #[serde(default)]
     pub layer_norm: bool,
+    /// A learned temperature divides the last feature maps before the spatial softmax
+    /// (DAML's `tf.contrib.layers.spatial_softmax`, trainable, starting at 1): the
+    /// keypoints can sharpen without the convolutions' weights growing. An outer
+    /// parameter only. (Checkpoints from before it existed have none.)
+    #[serde(default)]
+    pub learned_temperature: bool,
     /// Width of the robot state appended after the spatial softmax; 0: image-only (the
     /// paper's policy).
     #[serde(default)]
@@ -206,6 +212,7 @@ impl PolicyConfig {
             inner_clip: 10.0,
             bias_dim: 20,
             layer_norm: true,
+            learned_temperature: true,
             state_dim: 0,
             state_norm: Vec::new(),
         }
@@ -313,6 +320,8 @@ pub struct PolicyNet {
     pub psi: Vec<Tensor>,
     /// Layer-norm offsets, one `[filters]` per convolution (outer parameters only).
     pub norm: Vec<Tensor>,
+    /// The spatial softmax's learned temperature `[1]` (outer parameter only).
+    pub temperature: Option<Tensor>,
 }
 
 /// Variable `layer.name` (tch joins path segments with dots).
@@ -349,6 +358,9 @@ impl PolicyNet {
         } else {
             Vec::new()
         };
+        let temperature = cfg
+            .learned_temperature
+            .then(|| root.var("softmax_temperature", &[1], Init::Const(1.0)));
         if cfg.bias_dim > 0 {
             // Zero at the start, as in DAML: the context is what adaptation writes into.
             theta.push(root.var("context", &[cfg.bias_dim], Init::Const(0.0)));
@@ -379,6 +391,7 @@ impl PolicyNet {
             theta,
             psi,
             norm,
+            temperature,
         })
     }
 
@@ -401,6 +414,9 @@ impl PolicyNet {
                     + offset.view([1, -1, 1, 1]);
             }
             h = h.relu();
+        }
+        if let Some(temp) = &self.temperature {
+            h = h / temp;
         }
         let mut h = spatial_softmax(&h);
         let mut base = 2 * self.cfg.strides.len();
@@ -555,12 +571,22 @@ pub fn meta_objective(
     let mut total: Option<Tensor> = None;
     let (mut inner, mut pre) = (0.0, 0.0);
     for t in tasks {
-        let (adapted, li) = net.adapt(&net.theta, &net.psi, &t.inner, alpha, second_order);
-        inner += li.double_value(&[]);
         let state = t.outer_state.as_ref();
-        pre += tch::no_grad(|| net.bc_loss_with(&net.theta, &t.outer, state, &t.actions, &t.weights))
-            .double_value(&[]);
-        let lo = net.bc_loss_with(&adapted, &t.outer, state, &t.actions, &t.weights);
+        // α = 0 is behaviour cloning (the ladder's R0/R1): θ′ = θ exactly, so the inner
+        // gradient (and its second-order graph, most of a step's cost) is skipped and the
+        // loss before adaptation is the loss after; L_ψ is still evaluated for the log.
+        let lo = if alpha == 0.0 {
+            inner += tch::no_grad(|| net.adaptation_loss(&net.theta, &net.psi, &t.inner)).double_value(&[]);
+            let lo = net.bc_loss_with(&net.theta, &t.outer, state, &t.actions, &t.weights);
+            pre += lo.double_value(&[]);
+            lo
+        } else {
+            let (adapted, li) = net.adapt(&net.theta, &net.psi, &t.inner, alpha, second_order);
+            inner += li.double_value(&[]);
+            pre += tch::no_grad(|| net.bc_loss_with(&net.theta, &t.outer, state, &t.actions, &t.weights))
+                .double_value(&[]);
+            net.bc_loss_with(&adapted, &t.outer, state, &t.actions, &t.weights)
+        };
         total = Some(match total {
             Some(s) => s + lo,
             None => lo,
@@ -657,6 +683,7 @@ mod tests {
             .iter()
             .chain(&net.psi)
             .chain(&net.norm)
+            .chain(&net.temperature)
             .map(Tensor::shallow_clone)
             .collect();
         let mut checked = 0;
@@ -694,6 +721,45 @@ mod tests {
             .map(|p| p.grad().abs().sum(Kind::Double).double_value(&[]))
             .sum();
         assert!(psi_grad > 1e-9, "ψ has no gradient ({psi_grad})");
+    }
+
+    /// α = 0 takes the shortcut (no inner gradient); its loss and θ gradient must be
+    /// those of the full path through `adapt` with α = 0.
+    #[test]
+    fn behaviour_cloning_skips_the_inner_step_and_keeps_the_gradient() {
+        let _serial = crate::testing::torch_rng();
+        let net = tiny_net(Kind::Double);
+        let t = task(Kind::Double, 9, 3);
+        let (fast, inner, pre) = meta_objective(&net, std::slice::from_ref(&t), 0.0, true);
+        fast.backward();
+        // The pre-update head gets no gradient without an inner step: zero in its place.
+        let grad_or_zero = |p: &Tensor| {
+            let g = p.grad();
+            if g.defined() { g.copy() } else { p.zeros_like() }
+        };
+        let fast_grads: Vec<Tensor> = net.theta.iter().map(grad_or_zero).collect();
+        for p in &net.theta {
+            let mut g = p.grad();
+            if g.defined() {
+                let _ = g.zero_();
+            }
+        }
+        let (adapted, li) = net.adapt(&net.theta, &net.psi, &t.inner, 0.0, true);
+        let full = net.bc_loss(&adapted, &t.outer, &t.actions, &t.weights);
+        full.backward();
+        let value = full.double_value(&[]);
+        assert!((fast.double_value(&[]) - value).abs() <= 1e-12 * value.abs());
+        assert!((pre - value).abs() <= 1e-12 * value.abs(), "{pre} vs {value}");
+        assert!((inner - li.double_value(&[])).abs() <= 1e-12 * inner.abs());
+        for (g, p) in fast_grads.iter().zip(&net.theta) {
+            let diff = (g - grad_or_zero(p)).abs().max().double_value(&[]);
+            assert!(diff <= 1e-12, "θ gradient differs by {diff}");
+        }
+        assert!(
+            fast_grads
+                .iter()
+                .any(|g| g.abs().sum(Kind::Double).double_value(&[]) > 0.0)
+        );
     }
 
     #[test]
@@ -809,6 +875,8 @@ mod tests {
             net.norm.iter().all(|o| grad(o) > 0.0),
             "a layer-norm offset got no gradient"
         );
+        let temp = net.temperature.as_ref().unwrap();
+        assert!(grad(temp) > 0.0, "the softmax temperature got no gradient");
         let (alpha, clip) = (0.1, net.cfg.inner_clip);
         let (adapted, _) = net.adapt(&net.theta, &net.psi, &tasks[0].inner, alpha, false);
         let moved = |i: usize| (&adapted[i] - &net.theta[i]).abs().max().double_value(&[]);

@@ -70,6 +70,9 @@ pub struct MetaArgs {
     /// No layer norm after the convolutions (DAML has it, with a learned offset).
     #[arg(long)]
     no_layer_norm: bool,
+    /// No learned temperature before the spatial softmax (DAML learns one, from 1).
+    #[arg(long)]
+    fixed_temperature: bool,
     /// Width of the fully connected layers (paper: 100; DAML's push: 200).
     #[arg(long)]
     hidden: Option<i64>,
@@ -313,6 +316,7 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
                     a.bias_dim
                 },
                 layer_norm: !a.no_layer_norm,
+                learned_temperature: !a.fixed_temperature,
                 hidden: a.hidden.unwrap_or(base.hidden),
                 state_dim: set.state_norm.len() as i64,
                 state_norm: set.state_norm.clone(),
