@@ -415,9 +415,11 @@ impl PolicyNet {
             }
             h = h.relu();
         }
-        if let Some(temp) = &self.temperature {
-            h = h / temp;
-        }
+        // Not `h /= temp`: that divides in place the ReLU output autograd still needs.
+        let h = match &self.temperature {
+            Some(temp) => h / temp,
+            None => h,
+        };
         let mut h = spatial_softmax(&h);
         let mut base = 2 * self.cfg.strides.len();
         let t = h.size()[0];
