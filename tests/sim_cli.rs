@@ -128,6 +128,34 @@ fn eval_expert_bounds() {
     assert!(random <= 2, "{random}");
 }
 
+/// Pushing adds the blind baseline (both objects' experts averaged): it never lands the
+/// target, which is why behaviour cloning without the demo cannot be judged by success.
+#[test]
+fn eval_expert_pushing_reports_the_blind_baseline() {
+    let r = run(
+        sim_bin(),
+        &[
+            "eval-expert",
+            "--task",
+            "pushing",
+            "--split",
+            "train",
+            "--trials",
+            "1",
+            "--json",
+        ],
+    );
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let rows = stdout_json(&r);
+    let rows = rows.as_array().unwrap();
+    assert_eq!(rows.len(), 16);
+    let expert = rows.iter().filter(|r| r["expert_success"] == true).count();
+    let blind = rows.iter().filter(|r| r["blind_success"] == true).count();
+    assert!(rows.iter().all(|r| r["blind_moved_distractor"].is_boolean()));
+    assert!(expert >= 15, "{expert}");
+    assert!(blind <= 2, "{blind}");
+}
+
 #[test]
 fn pushing_episodes_generate_and_ingest() {
     let dir = tempfile::tempdir().unwrap();

@@ -67,6 +67,8 @@ evaluate() {
     "${rt[@]}" --json -o "$F/$r/eval-$name.json" > /dev/null
   field "'eval $name: %d/%d (%.1f %%, 95 %% CI %.1f-%.1f), wrong object %d, control %d, loss %.4f before adapting, %.4f after' % (d['successes'], d['trials'], 100*d['rate'], 100*d['wilson95'][0], 100*d['wilson95'][1], d['wrong_object'], d['control'], d.get('loss_pre', float('nan')), d.get('loss_post', float('nan')))" \
     < "$F/$r/eval-$name.json"
+  field "'  objects: target moved %d, distractor %d, neither %d; target to square %.1f -> %.1f cm' % (d['pushing']['target_moved'], d['pushing']['distractor_moved'], d['pushing']['untouched'], d['pushing']['mean_gap_start_cm'], d['pushing']['mean_gap_end_cm']) if d.get('pushing') else ''" \
+    < "$F/$r/eval-$name.json" | grep . || true
 }
 
 # gen_ingest N SEED DIR: milv-sim gen + milv-ingest into DIR/sim and DIR/dataset.

@@ -8,7 +8,9 @@ use anyhow::Context as _;
 use clap::{Parser, Subcommand, ValueEnum};
 use milv::cli;
 use milv::ingest::{EpisodeMeta, Sidecar};
-use milv::sim::env::{Rollout, Sim, SmoothRandom, Task, evaluate, expert_action, paired_clips, rollout};
+use milv::sim::env::{
+    Rollout, Sim, SmoothRandom, Task, blind_expert_action, evaluate, expert_action, paired_clips, rollout,
+};
 use milv::sim::render::{Domain, Randomization};
 use milv::sim::shapes::{self, Shape};
 use milv::video::{Codec, VideoWriter};
@@ -89,7 +91,9 @@ enum Cmd {
         json: bool,
     },
     /// Runs the scripted expert (upper bound) and a random policy (lower bound) on every
-    /// shape of a split and prints the success table.
+    /// shape of a split and prints the success table. Pushing adds the "blind" baseline:
+    /// both objects' experts averaged, where behaviour cloning that cannot tell the target
+    /// from the distractor lands.
     EvalExpert {
         #[arg(long, value_enum, default_value = "drawing")]
         task: Family,
@@ -386,11 +390,31 @@ fn run(args: Args) -> anyhow::Result<u8> {
                 move |_: &Sim| milv::sim::Vec2::new(r.random_range(-5.0..5.0), r.random_range(-5.0..5.0))
             })
             .context("empty task")?;
-            for (e, r) in expert.per_task.iter().zip(&random.per_task) {
-                rows.push(
-                    serde_json::json!({"task": e.task, "expert_success": e.successes == e.trials,
-                    "random_success": r.successes, "random_trials": r.trials}),
-                );
+            // Pushing: the two targets' experts averaged, where a squared-loss policy that
+            // cannot tell the objects apart lands. Success counts only the target; a blind
+            // push that lands the distractor is reported apart.
+            let blind = (family == Family::Pushing).then(|| {
+                tasks
+                    .iter()
+                    .filter_map(|t| Sim::reset(t.clone(), Domain::Robot, 32))
+                    .map(|sim| {
+                        let mut sim = sim;
+                        while !sim.done() {
+                            let a = blind_expert_action(&sim);
+                            sim.step(a);
+                        }
+                        (sim.success(), sim.distractor_moved())
+                    })
+                    .collect::<Vec<_>>()
+            });
+            for (i, (e, r)) in expert.per_task.iter().zip(&random.per_task).enumerate() {
+                let mut row = serde_json::json!({"task": e.task, "expert_success": e.successes == e.trials,
+                    "random_success": r.successes, "random_trials": r.trials});
+                if let Some((ok, wrong)) = blind.as_ref().and_then(|b| b.get(i)) {
+                    row["blind_success"] = (*ok).into();
+                    row["blind_moved_distractor"] = (*wrong).into();
+                }
+                rows.push(row);
             }
             if json {
                 cli::print_json(&rows)?;
@@ -414,6 +438,15 @@ fn run(args: Args) -> anyhow::Result<u8> {
                     random.trials,
                     100.0 * random.success_rate()
                 );
+                if let Some(b) = &blind {
+                    println!(
+                        "blind (both targets' experts averaged): target in the square {}/{}, distractor moved {}/{}",
+                        b.iter().filter(|(ok, _)| *ok).count(),
+                        b.len(),
+                        b.iter().filter(|(_, wrong)| *wrong).count(),
+                        b.len()
+                    );
+                }
             }
         }
     }

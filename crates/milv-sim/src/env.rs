@@ -128,6 +128,18 @@ impl Task {
     }
 }
 
+/// What a pushing episode did to its objects (cm), from [`Sim::push_outcome`].
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PushOutcome {
+    /// How far the target's centroid moved from its start.
+    pub target_moved_cm: f32,
+    /// How far the distractor's centroid moved (over 1 cm: a wrong-object push).
+    pub distractor_moved_cm: f32,
+    /// The target's distance to the square's centre at the start and now.
+    pub target_gap_start_cm: f32,
+    pub target_gap_cm: f32,
+}
+
 /// One episode in progress.
 pub struct Sim {
     task: Task,
@@ -287,6 +299,28 @@ impl Sim {
         }
     }
 
+    /// Pushing: what the episode did to the objects so far, so that a failure reads apart
+    /// as "never reached the target", "moved it the wrong way" or "pushed the distractor".
+    pub fn push_outcome(&self) -> Option<PushOutcome> {
+        let Task::Pushing {
+            square,
+            target_start,
+            distractor_start,
+            ..
+        } = &self.task
+        else {
+            return None;
+        };
+        let w = self.world.as_ref()?;
+        let (target, distractor) = (w.bodies.first()?, w.bodies.get(1)?);
+        Some(PushOutcome {
+            target_moved_cm: target.pos.dist(*target_start),
+            distractor_moved_cm: distractor.pos.dist(*distractor_start),
+            target_gap_start_cm: target_start.dist(*square),
+            target_gap_cm: target.pos.dist(*square),
+        })
+    }
+
     /// Low-dimensional state for sidecars: end-effector position (cm).
     pub fn state(&self) -> [f32; 2] {
         [self.ee.x, self.ee.y]
@@ -309,6 +343,22 @@ pub fn expert_action(sim: &Sim) -> Vec2 {
             Some(b) => push::expert_action(sim.end_effector(), b, *square, push::PUSHER_RADIUS_CM),
             None => Vec2::ZERO,
         },
+    }
+}
+
+/// The mean of the expert's actions with each object as the target: where a policy trained
+/// with a squared loss lands when it cannot tell the target from the distractor (behaviour
+/// cloning that ignores the demo), at least while nothing in the frame says which object
+/// the pusher went for. A baseline for that failure; drawing has no such ambiguity and gets
+/// the expert's action.
+pub fn blind_expert_action(sim: &Sim) -> Vec2 {
+    match (&sim.task, sim.world.as_ref().map(|w| w.bodies.as_slice())) {
+        (Task::Pushing { square, .. }, Some([target, distractor])) => {
+            let a = push::expert_action(sim.ee, target, *square, push::PUSHER_RADIUS_CM);
+            let b = push::expert_action(sim.ee, distractor, *square, push::PUSHER_RADIUS_CM);
+            (a + b) * 0.5
+        }
+        _ => expert_action(sim),
     }
 }
 
@@ -576,6 +626,33 @@ mod tests {
             "expert succeeded on {ok}/{}",
             all.len()
         );
+    }
+
+    #[test]
+    fn the_blind_expert_averages_the_two_targets() {
+        use rand::SeedableRng;
+        let mut rng = rand::rngs::StdRng::seed_from_u64(4);
+        let (train, _) = push::object_catalog();
+        let task = pushing_task(&train, &mut rng).unwrap();
+        let sim = Sim::reset(task.clone(), Domain::Robot, 32).unwrap();
+        let Task::Pushing { square, .. } = &task else {
+            panic!("not pushing")
+        };
+        let w = sim.world.as_ref().unwrap();
+        let mean = (push::expert_action(sim.ee, &w.bodies[0], *square, push::PUSHER_RADIUS_CM)
+            + push::expert_action(sim.ee, &w.bodies[1], *square, push::PUSHER_RADIUS_CM))
+            * 0.5;
+        assert_eq!(blind_expert_action(&sim), mean);
+        assert_ne!(mean, expert_action(&sim), "the two targets' experts agree here");
+        let drawing = Sim::reset(
+            Task::Drawing {
+                shape: shapes::training_shapes().remove(0),
+            },
+            Domain::Robot,
+            32,
+        )
+        .unwrap();
+        assert_eq!(blind_expert_action(&drawing), expert_action(&drawing));
     }
 
     #[test]

@@ -21,7 +21,9 @@ use tch::nn::Module;
 use tch::{Device, Tensor};
 
 use milv_sim::Vec2;
-use milv_sim::env::{Sim, Task, another_start, expert_action, pushing_task, rollout, swap_distractor};
+use milv_sim::env::{
+    PushOutcome, Sim, Task, another_start, expert_action, pushing_task, rollout, swap_distractor,
+};
 use milv_sim::push::object_catalog;
 use milv_sim::render::Domain;
 use milv_sim::shapes::{Shape, test_shapes, training_shapes};
@@ -332,6 +334,47 @@ pub struct TaskOutcome {
     /// a near miss reads apart from a policy that never finds the line.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub scores: Vec<usize>,
+    /// Pushing: what each trial did to the objects.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub pushes: Vec<PushOutcome>,
+}
+
+/// Pushing trials summed up, so a control failure reads at a glance: a policy that never
+/// reaches the target, one that moves it the wrong way, one that pushes it short.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PushSummary {
+    /// Trials that moved the target by more than 1 cm.
+    pub target_moved: usize,
+    /// Trials that moved the distractor by more than 1 cm.
+    pub distractor_moved: usize,
+    /// Trials that moved neither.
+    pub untouched: usize,
+    /// Mean distance of the target's centre to the square's centre at the start and the
+    /// end (cm); the square is 12 cm wide.
+    pub mean_gap_start_cm: f64,
+    pub mean_gap_end_cm: f64,
+}
+
+impl PushSummary {
+    /// None without pushing trials.
+    pub fn of<'a>(pushes: impl IntoIterator<Item = &'a PushOutcome>) -> Option<PushSummary> {
+        let mut s = PushSummary::default();
+        let mut n = 0usize;
+        for p in pushes {
+            let (t, d) = (p.target_moved_cm > 1.0, p.distractor_moved_cm > 1.0);
+            s.target_moved += usize::from(t);
+            s.distractor_moved += usize::from(d);
+            s.untouched += usize::from(!t && !d);
+            s.mean_gap_start_cm += f64::from(p.target_gap_start_cm);
+            s.mean_gap_end_cm += f64::from(p.target_gap_cm);
+            n += 1;
+        }
+        (n > 0).then(|| PushSummary {
+            mean_gap_start_cm: s.mean_gap_start_cm / n as f64,
+            mean_gap_end_cm: s.mean_gap_end_cm / n as f64,
+            ..s
+        })
+    }
 }
 
 /// Success of one learner on one task family.
@@ -369,6 +412,9 @@ pub struct FamilyResult {
     pub loss_pre: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub loss_post: Option<f64>,
+    /// Pushing: what the trials did to the objects.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pushing: Option<PushSummary>,
     pub per_task: Vec<TaskOutcome>,
 }
 
@@ -557,6 +603,7 @@ pub fn evaluate_one_shot(
             if opts.family == Family::Drawing {
                 o.scores.push(sim.score());
             }
+            o.pushes.extend(sim.push_outcome());
             if sim.success() {
                 o.successes += 1;
             } else if opts.family == Family::Pushing && sim.distractor_moved() {
@@ -592,6 +639,7 @@ pub fn evaluate_one_shot(
         frames: opts.frames,
         loss_pre: (measured > 0).then(|| pre / measured as f64),
         loss_post: (measured > 0).then(|| post / measured as f64),
+        pushing: PushSummary::of(per_task.iter().flat_map(|t| &t.pushes)),
         per_task,
     })
 }
@@ -906,7 +954,33 @@ mod tests {
                 got.rate
             );
             assert_eq!(got.successes + got.wrong_object + got.control, got.trials);
+            match (family, &got.pushing) {
+                (Family::Drawing, None) => {}
+                (Family::Pushing, Some(p)) => {
+                    // The expert moves every target and ends inside the 12 cm square.
+                    assert_eq!(p.target_moved, got.trials, "{p:?}");
+                    assert_eq!(p.untouched, 0, "{p:?}");
+                    assert!(p.mean_gap_start_cm > 10.0 && p.mean_gap_end_cm < 6.0, "{p:?}");
+                    let per_trial: usize = got.per_task.iter().map(|t| t.pushes.len()).sum();
+                    assert_eq!(per_trial, got.trials);
+                }
+                (f, p) => panic!("{f:?}: push summary {p:?}"),
+            }
         }
+    }
+
+    #[test]
+    fn the_push_summary_counts_what_each_trial_moved() {
+        let p = |t: f32, d: f32, gap: f32| PushOutcome {
+            target_moved_cm: t,
+            distractor_moved_cm: d,
+            target_gap_start_cm: 20.0,
+            target_gap_cm: gap,
+        };
+        let s = PushSummary::of(&[p(5.0, 0.0, 10.0), p(0.5, 3.0, 20.0), p(0.0, 0.2, 30.0)]).unwrap();
+        assert_eq!((s.target_moved, s.distractor_moved, s.untouched), (1, 1, 1));
+        assert!((s.mean_gap_start_cm - 20.0).abs() < 1e-9 && (s.mean_gap_end_cm - 20.0).abs() < 1e-9);
+        assert!(PushSummary::of(&[]).is_none());
     }
 
     #[test]

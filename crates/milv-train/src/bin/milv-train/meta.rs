@@ -527,6 +527,13 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
         if family == Family::Pushing {
             println!("failures: wrong object {}, control {}", r.wrong_object, r.control);
         }
+        if let Some(p) = &r.pushing {
+            println!(
+                "objects: target moved in {} trials, distractor in {}, neither in {}; target to square \
+                 {:.1} cm at the start, {:.1} cm at the end (mean)",
+                p.target_moved, p.distractor_moved, p.untouched, p.mean_gap_start_cm, p.mean_gap_end_cm
+            );
+        }
         if let (Some(pre), Some(post)) = (r.loss_pre, r.loss_post) {
             println!(
                 "imitation loss on the expert's rollouts of the evaluated instances: {pre:.4} before adapting, \
