@@ -397,8 +397,7 @@ fn run(args: Args) -> anyhow::Result<u8> {
                 tasks
                     .iter()
                     .filter_map(|t| Sim::reset(t.clone(), Domain::Robot, 32))
-                    .map(|sim| {
-                        let mut sim = sim;
+                    .map(|mut sim| {
                         while !sim.done() {
                             let a = blind_expert_action(&sim);
                             sim.step(a);

@@ -128,12 +128,15 @@ impl Task {
     }
 }
 
+/// How far an object's centroid must move to count as pushed (cm).
+pub const MOVED_CM: f32 = 1.0;
+
 /// What a pushing episode did to its objects (cm), from [`Sim::push_outcome`].
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct PushOutcome {
     /// How far the target's centroid moved from its start.
     pub target_moved_cm: f32,
-    /// How far the distractor's centroid moved (over 1 cm: a wrong-object push).
+    /// How far the distractor's centroid moved (over [`MOVED_CM`]: a wrong-object push).
     pub distractor_moved_cm: f32,
     /// The target's distance to the square's centre at the start and now.
     pub target_gap_start_cm: f32,
@@ -294,7 +297,7 @@ impl Sim {
             (Task::Pushing { distractor_start, .. }, Some(w)) => w
                 .bodies
                 .get(1)
-                .is_some_and(|b| b.pos.dist(*distractor_start) > 1.0),
+                .is_some_and(|b| b.pos.dist(*distractor_start) > MOVED_CM),
             _ => false,
         }
     }

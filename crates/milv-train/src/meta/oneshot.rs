@@ -22,7 +22,7 @@ use tch::{Device, Tensor};
 
 use milv_sim::Vec2;
 use milv_sim::env::{
-    PushOutcome, Sim, Task, another_start, expert_action, pushing_task, rollout, swap_distractor,
+    MOVED_CM, PushOutcome, Sim, Task, another_start, expert_action, pushing_task, rollout, swap_distractor,
 };
 use milv_sim::push::object_catalog;
 use milv_sim::render::Domain;
@@ -343,9 +343,9 @@ pub struct TaskOutcome {
 /// reaches the target, one that moves it the wrong way, one that pushes it short.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct PushSummary {
-    /// Trials that moved the target by more than 1 cm.
+    /// Trials that moved the target by more than [`MOVED_CM`].
     pub target_moved: usize,
-    /// Trials that moved the distractor by more than 1 cm.
+    /// Trials that moved the distractor by more than [`MOVED_CM`].
     pub distractor_moved: usize,
     /// Trials that moved neither.
     pub untouched: usize,
@@ -361,7 +361,7 @@ impl PushSummary {
         let mut s = PushSummary::default();
         let mut n = 0usize;
         for p in pushes {
-            let (t, d) = (p.target_moved_cm > 1.0, p.distractor_moved_cm > 1.0);
+            let (t, d) = (p.target_moved_cm > MOVED_CM, p.distractor_moved_cm > MOVED_CM);
             s.target_moved += usize::from(t);
             s.distractor_moved += usize::from(d);
             s.untouched += usize::from(!t && !d);
