@@ -15,8 +15,15 @@
 #                 actions), evaluated on held-out and training tasks, own and swapped demos
 #           r3    DAML human → robot, training tasks
 #           r4    r3's policy on held-out tasks (reports in r3/)
+#           r5    π_I on translated human demos: adds a held-out split (R5_EPISODES test
+#                 instances, seed 22) and the alignments to the dataset, trains the coupled
+#                 A-CycleGAN (ACG_STEPS, 2000), translates, reports π_I's imagined actions
+#                 on held-out human demos against the true ones, scores and curates
+#           r6    MILV on r5's imagined latents with the TRUE robot actions
+#                 (`meta --true-actions`), held-out tasks, own and swapped demos
+#           r7    full MILV on r5's imagined latents and actions, held-out tasks
 # Settings from the environment: EPISODES (150), SIZE (64), STEPS (1500), TRIALS per task
-# and seed (3), SEEDS (0,1), THREADS (2), MILV_BIN (target/debug), META_ARGS (extra
+# and seed (3), SEEDS (0,1), THREADS (2), ACG_STEPS (2000), R5_EPISODES (24), MILV_BIN (target/debug), META_ARGS (extra
 # `milv-train meta` flags for every rung, e.g. "--state" or "--lr 3e-4": one change per
 # --out folder, so each experiment keeps its own reports). A rung whose run folder
 # holds checkpoints resumes it (up to STEPS); every report lands in OUT/FAMILY/RUNG/.
@@ -29,16 +36,17 @@ out=out/ladder
 while [ $# -gt 0 ]; do
   case $1 in
     --out) out=$2; shift 2 ;;
-    data|r0|r1|r2|r3|r4) rungs+=("$1"); shift ;;
-    *) echo "unknown argument $1 (rungs: data r0 r1 r2 r3 r4)" >&2; exit 2 ;;
+    data|r0|r1|r2|r3|r4|r5|r6|r7) rungs+=("$1"); shift ;;
+    *) echo "unknown argument $1 (rungs: data r0 r1 r2 r3 r4 r5 r6 r7)" >&2; exit 2 ;;
   esac
 done
 case $fam in
   drawing|pushing) ;;
   *) echo "usage: tools/ladder.sh drawing|pushing RUNG... [--out DIR]" >&2; exit 2 ;;
 esac
-[ ${#rungs[@]} -gt 0 ] || { echo "name at least one rung: data r0 r1 r2 r3 r4" >&2; exit 2; }
+[ ${#rungs[@]} -gt 0 ] || { echo "name at least one rung: data r0 r1 r2 r3 r4 r5 r6 r7" >&2; exit 2; }
 : "${R0_SEEDS:=11 12 13}" "${R0_STEPS:=300}"
+: "${ACG_STEPS:=2000}" "${R5_EPISODES:=24}"
 : "${EPISODES:=150}" "${SIZE:=64}" "${STEPS:=1500}" "${TRIALS:=3}" "${SEEDS:=0,1}" "${THREADS:=2}"
 B=${MILV_BIN:-$PWD/target/debug}
 [ -x "$B/milv-train" ] || tools/setup.sh
@@ -47,14 +55,15 @@ ds="$F/dataset"
 rt=(--threads "$THREADS")
 field() { python3 -c "import json,sys; d=json.load(sys.stdin); print($1)"; }
 
-# meta RUNG ARGS...: meta-trains (or resumes) the rung's policy to STEPS steps on DS
-# (default: the ladder's dataset); RUNG is a folder under OUT/FAMILY.
+# meta RUNG ARGS...: meta-trains (or resumes) the rung's policy (VARIANT, daml) to STEPS
+# steps on DS (default: version 1 of the ladder's dataset, the robot and human demos, so
+# r5's later versions change nothing for r1-r4); RUNG is a folder under OUT/FAMILY.
 meta() {
   local r=$1
   shift
   local resume=()
   ls "$F/$r/run/checkpoints"/step-* >/dev/null 2>&1 && resume=(--resume)
-  "$B/milv-train" meta "${DS:-$ds}" --variant daml --out "$F/$r/run" --steps "$STEPS" \
+  "$B/milv-train" meta "${DS:-$ds@1}" --variant "${VARIANT:-daml}" --out "$F/$r/run" --steps "$STEPS" \
     --checkpoint-every 250 "${resume[@]}" "$@" ${META_ARGS:-} "${rt[@]}" --json > "$F/$r/meta.json"
   field "'meta: step %d, outer loss %.4f -> %.4f after adaptation, %.4f before (first and last tenth of the steps run)' % (d['step'], d['outer_first'], d['outer_last'], d['outer_pre_last'])" < "$F/$r/meta.json"
 }
@@ -79,6 +88,13 @@ gen_ingest() {
     "$B/milv-sim" gen --task "$fam" --episodes "$1" --seed "$2" --size "$SIZE" --out "$3/sim"
     "$B/milv-ingest" "$3/dataset" --manifest "$3/sim/manifest.jsonl" --require-actions
   fi
+}
+
+gt="$F/ground_truth.jsonl"
+# The translator r5 trained, and the dataset version it curated.
+translator() {
+  [ -f "$F/r5/checkpoint.txt" ] || { echo "run r5 first: $1 trains on its translation" >&2; exit 2; }
+  cat "$F/r5/checkpoint.txt"
 }
 
 for r in "${rungs[@]}"; do
@@ -113,6 +129,47 @@ for r in "${rungs[@]}"; do
     r4)
       [ -d "$F/r3/run" ] || { echo "run r3 first: R4 evaluates its policy on held-out tasks" >&2; exit 2; }
       evaluate r3 test --split test ;;
+    r5)
+      if [ ! -d "$F/r5/test/sim" ]; then
+        "$B/milv-sim" gen --task "$fam" --episodes "$R5_EPISODES" --seed 22 --split test --size "$SIZE" \
+          --out "$F/r5/test/sim"
+        "$B/milv-ingest" "$ds" --manifest "$F/r5/test/sim/manifest.jsonl" --require-actions
+        "$B/milv-align" "$ds" --features motion --json > "$F/r5/align.json"
+      fi
+      # Both splits' human/robot demo pairs, paths relative to the file.
+      (sed 's#"human":"#"human":"sim/#; s#"robot":"#"robot":"sim/#' "$F/sim/ground_truth.jsonl"
+       sed 's#"human":"#"human":"r5/test/sim/#; s#"robot":"#"robot":"r5/test/sim/#' \
+         "$F/r5/test/sim/ground_truth.jsonl") > "$gt"
+      resume=()
+      ls "$F/r5/acg/checkpoints"/step-* >/dev/null 2>&1 && resume=(--resume)
+      "$B/milv-train" cyclegan "$ds" --out "$F/r5/acg" --size "$SIZE" --steps "$ACG_STEPS" "${resume[@]}" \
+        --idm-batch 8 --lr-idm 0.001 --alignment motion --checkpoint-every 500 --eval-every 500 \
+        --grid-every "$ACG_STEPS" --truth "$gt" --eval-pairs 12 ${ACG_ARGS:-} "${rt[@]}" --json > "$F/r5/acg.json"
+      ckpt=$(ls -d "$F/r5/acg/checkpoints"/step-* | sort -t- -k2 -n | tail -1)
+      "$B/milv-train" translate "$ds" --checkpoint "$ckpt" "${rt[@]}" --json > "$F/r5/translate.json"
+      "$B/milv-train" eval-translation "$ds" --checkpoint "$ckpt" --truth "$gt" --pairs "$R5_EPISODES" \
+        "${rt[@]}" --json > "$F/r5/eval-translation.json"
+      field "'translation (held-out human demos): SSIM %.3f (untranslated %.3f)' % (d['ssim'], d['ssim_untranslated'])" < "$F/r5/eval-translation.json"
+      for k in translated_fit robot_demo_fit; do
+        field "'$k: MAE %.3f (zero predictor %.3f, ratio %.2f), correlation %s, spread %s vs true %s' % (d['$k']['mae'], d['$k']['mae_zero'], d['$k']['mae']/d['$k']['mae_zero'], [round(c,2) for c in d['$k']['corr']], [round(x,2) for x in d['$k']['std']], [round(x,2) for x in d['$k']['std_true']])" \
+          < "$F/r5/eval-translation.json"
+      done
+      model=$(python3 -c "import json,sys; print(json.load(open(sys.argv[1]))['model_id'])" "$ckpt/checkpoint.json")
+      "$B/milv-score" run "$ds" --table imagined --model-id "$model" --json > "$F/r5/score.json"
+      "$B/milv-score" curate "$ds" --top-fraction 0.8 --json > "$F/r5/curate.json"
+      field "d['version']" < "$F/r5/curate.json" > "$F/r5/curated_version.txt"
+      echo "$ckpt" > "$F/r5/checkpoint.txt" ;;
+    r6)
+      tr=$(translator r6)
+      DS="$ds@$(cat "$F/r5/curated_version.txt")" VARIANT=milv meta r6 --translator "$tr" --truth "$gt" --true-actions
+      evaluate r6 test --split test
+      evaluate r6 test-swap --split test --demo swap ;;
+    r7)
+      tr=$(translator r7)
+      DS="$ds@$(cat "$F/r5/curated_version.txt")" VARIANT=milv meta r7 --translator "$tr" --truth "$gt" \
+        --allow-weak-translator
+      evaluate r7 test --split test
+      evaluate r7 test-swap --split test --demo swap ;;
   esac
   echo "($r took $(( ($(date +%s) - start) / 60 )) min)"
 done

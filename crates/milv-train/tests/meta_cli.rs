@@ -232,6 +232,77 @@ fn wrong_translators_and_missing_inputs_are_clear_errors() {
         err.contains("imagined vs true robot actions") && err.contains("warning"),
         "{err}"
     );
+    // --true-actions (the ladder's R6): the same imagined inputs, the true robot actions
+    // as targets, so no refusal, targets that vary as the robot's do, and rows that say so.
+    let spread = |err: &str| -> Vec<f64> {
+        let line = err
+            .lines()
+            .find(|l| l.contains("standard deviation (cm)"))
+            .unwrap_or_else(|| panic!("{err}"));
+        let inside = &line[line.find('[').unwrap() + 1..line.find(']').unwrap()];
+        inside.split(", ").map(|x| x.parse().unwrap()).collect()
+    };
+    let imagined = spread(&err);
+    let truth_run = dir.path().join("r6");
+    let mut r6 = base("milv", "r6");
+    r6.extend([
+        "--translator".into(),
+        s(&coupled).into(),
+        "--truth".into(),
+        s(&fx.truth).into(),
+        "--true-actions".into(),
+        "--checkpoint-every".into(),
+        "1".into(),
+    ]);
+    let (code, _, err) = call(&r6);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        err.contains("--true-actions") && !err.contains("refusing"),
+        "{err}"
+    );
+    let truth = spread(&err);
+    assert!(
+        truth.iter().zip(&imagined).all(|(t, i)| *t > 0.1 && t != i),
+        "true {truth:?} vs imagined {imagined:?}"
+    );
+    let ev = json(&[
+        "eval",
+        s(&truth_run),
+        "--trials",
+        "1",
+        "--split",
+        "train",
+        "--threads",
+        "1",
+        "--json",
+    ]);
+    assert_eq!(ev["true_actions"], true, "{ev}");
+    // A human demo the truth file does not pair is an error naming the file and the demo.
+    let partial = dir.path().join("partial_truth.jsonl");
+    let first = std::fs::read_to_string(&fx.truth).unwrap();
+    std::fs::write(&partial, first.lines().next().unwrap()).unwrap();
+    let mut r6c = base("milv", "r6c");
+    r6c.extend([
+        "--translator".into(),
+        s(&coupled).into(),
+        "--truth".into(),
+        s(&partial).into(),
+        "--true-actions".into(),
+    ]);
+    let (code, _, err) = call(&r6c);
+    assert_ne!(code, 0);
+    assert!(
+        err.contains("partial_truth.jsonl") && err.contains("has no robot demo"),
+        "{err}"
+    );
+    let (code, _, err) = call(
+        &base("milv", "r6b")
+            .into_iter()
+            .chain(["--true-actions".into()])
+            .collect::<Vec<_>>(),
+    );
+    assert_ne!(code, 0);
+    assert!(err.contains("--truth"), "{err}");
     let (code, _, err) = run(&["eval", s(&dir.path().join("nothing"))]);
     assert_ne!(code, 0);
     assert!(err.contains("neither a policy checkpoint"), "{err}");

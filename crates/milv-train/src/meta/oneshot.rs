@@ -792,8 +792,26 @@ pub struct EvalRecord {
     /// paper's image-only policy, and its table row says so.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub state_input: bool,
+    /// The policy imitated the true robot actions, not π_I's (`meta --true-actions`): a
+    /// diagnostic, not the method, and its table row says so.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub true_actions: bool,
     #[serde(flatten)]
     pub result: FamilyResult,
+}
+
+impl EvalRecord {
+    /// What sets this policy apart from the paper's (empty for the paper's own setting).
+    pub fn setting_note(&self) -> String {
+        let mut note = String::new();
+        if self.state_input {
+            note += " (+ robot state input)";
+        }
+        if self.true_actions {
+            note += " (true robot actions as targets)";
+        }
+        note
+    }
 }
 
 fn pct(x: f64) -> String {
@@ -832,12 +850,12 @@ pub fn tables_markdown(records: &[EvalRecord]) -> String {
             })
             .next()
             .unwrap_or("");
-        let state = if records.iter().any(|r| r.variant == *v && r.state_input) {
-            " (+ robot state input)"
-        } else {
-            ""
-        };
-        s += &format!("| {}{note}{state} |", v.label());
+        let mine: Vec<&EvalRecord> = records.iter().filter(|r| r.variant == *v).collect();
+        s += &format!(
+            "| {}{note}{} |",
+            v.label(),
+            mine.iter().map(|r| r.setting_note()).max().unwrap_or_default()
+        );
         for f in &fams {
             s += &match find(*v, *f) {
                 Some(r) => {

@@ -287,6 +287,10 @@ pub struct MetaConfig {
     /// robot demonstration's frames without actions (DAML's video-only robot → robot).
     #[serde(default = "human")]
     pub inner_domain: milv_data::Domain,
+    /// An imagined-data variant imitated the true robot actions instead of π_I's
+    /// (`meta --true-actions`, the ladder's R6 diagnostic).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub true_actions: bool,
 }
 
 fn human() -> milv_data::Domain {
@@ -304,6 +308,7 @@ impl Default for MetaConfig {
             second_order: true,
             seed: 0,
             inner_domain: milv_data::Domain::Human,
+            true_actions: false,
         }
     }
 }

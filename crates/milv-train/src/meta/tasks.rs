@@ -7,6 +7,11 @@
 //! | `wstable` | as `milv` | as `milv`, weight 1 |
 //! | `feedimg` | a human demo's translated frames ŷ^r | another human demo: translated frames, â^r, curated weights |
 //!
+//! With [`MetaDataOptions::true_actions`] an imagined-data variant's outer actions are the
+//! true robot actions of each human demo's ground-truth robot demo instead of π_I's â^r
+//! (the ladder's R6: imagined inputs, true targets, so the translation's images and its
+//! inverse dynamics are measured apart).
+//!
 //! Only `split = train`, `kind = demo` episodes are read. A task with a single human demo
 //! uses it for both sides. Sequences are held in memory as f32 tensors on the CPU and
 //! moved to the device per meta-batch.
@@ -18,6 +23,7 @@ use milv_data::{Dataset, Domain, Episode, Kind as EpisodeKind, Split, ops};
 use rand::{Rng, SeedableRng, rngs::StdRng};
 use tch::{Device, Tensor};
 
+use crate::gan::eval::truth_pairs;
 use crate::meta::policy::{Input, MetaTask, Variant, standardised_states};
 use crate::run::image::{load_clips, to_chw};
 use crate::{Error, Result};
@@ -80,6 +86,10 @@ pub struct MetaDataOptions {
     pub inner_domain: Domain,
     /// Also read the robot's state along the outer (robot demo) sequences (DAML only).
     pub with_state: bool,
+    /// Ground-truth human/robot demo pairs (milv-sim's `ground_truth.jsonl`): the outer
+    /// actions become the true robot actions of each human demo's pair (imagined-data
+    /// variants only).
+    pub true_actions: Option<std::path::PathBuf>,
 }
 
 fn decode(img: &Image, size: u32, what: &str) -> Result<Vec<f32>> {
@@ -174,6 +184,19 @@ impl MetaSet {
             return Err(Error::Data(format!(
                 "version {v}: no task has usable demonstrations"
             )));
+        }
+        if let Some(path) = &opts.true_actions {
+            if opts.variant == Variant::Daml {
+                return Err(Error::Config(
+                    "--true-actions replaces imagined actions; daml trains on the true robot actions already"
+                        .into(),
+                ));
+            }
+            set.use_true_actions(ds, v, &eps, path)?;
+            parts.push(format!(
+                "true-actions={}",
+                std::fs::read_to_string(path).unwrap_or_default()
+            ));
         }
         if opts.with_state {
             set.attach_states(ds, v)?;
@@ -394,6 +417,60 @@ impl MetaSet {
             };
             self.push(&task_of(&view.episode), seq, true, true);
         }
+        Ok(())
+    }
+
+    /// Replaces every sequence's imagined actions with the true actions of its human demo's
+    /// ground-truth robot demo (`truth`, see [`truth_pairs`]). A demo without a pair, or
+    /// whose pair differs in length, is an error naming both.
+    fn use_true_actions(
+        &mut self,
+        ds: &Dataset,
+        v: u64,
+        eps: &[Episode],
+        truth: &std::path::Path,
+    ) -> Result<()> {
+        let pairs: BTreeMap<String, String> = truth_pairs(eps, truth)?.into_iter().collect();
+        let wanted: BTreeSet<&String> = self
+            .seqs
+            .iter()
+            .filter_map(|s| pairs.get(&s.episode_id))
+            .collect();
+        let robots: BTreeMap<String, Episode> = eps
+            .iter()
+            .filter(|e| wanted.contains(&e.episode_id))
+            .map(|e| (e.episode_id.clone(), e.clone()))
+            .collect();
+        let clips = load_clips(ds, v, &robots, true)?;
+        for seq in &mut self.seqs {
+            let id = &seq.episode_id;
+            let clip = pairs.get(id).and_then(|r| clips.get(r)).ok_or_else(|| {
+                Error::Data(format!(
+                    "{}: human demo {id} has no robot demo with actions at version {v}",
+                    truth.display()
+                ))
+            })?;
+            let n = seq.frames.size()[0];
+            let acts = clip
+                .actions
+                .as_ref()
+                .filter(|a| a.len() as i64 == n)
+                .ok_or_else(|| {
+                    Error::Data(format!(
+                        "{}: robot demo {} has {} actions for the {n} frames of human demo {id}",
+                        truth.display(),
+                        clip.episode_id,
+                        clip.actions.as_ref().map_or(0, Vec::len)
+                    ))
+                })?;
+            let flat: Vec<f32> = acts.iter().flatten().copied().collect();
+            seq.actions = Some(Tensor::from_slice(&flat).view([n, -1]));
+        }
+        self.action_dim = self
+            .seqs
+            .first()
+            .and_then(|s| s.actions.as_ref())
+            .map_or(0, |a| a.size()[1]);
         Ok(())
     }
 

@@ -94,6 +94,11 @@ pub struct MetaArgs {
     /// Train on imagined actions even when --truth says they do not follow the true ones.
     #[arg(long)]
     allow_weak_translator: bool,
+    /// Imagined-data variants: imitate the TRUE robot actions of each human demo's pair in
+    /// --truth instead of π_I's imagined ones (a diagnostic, the ladder's R6: it separates
+    /// the imagined inputs from the imagined actions; a row trained with it says so).
+    #[arg(long, requires = "truth")]
+    true_actions: bool,
     /// Small networks (tests).
     #[arg(long)]
     tiny: bool,
@@ -240,6 +245,15 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
             score_run: a.score_run.clone(),
             inner_domain: a.inner,
             with_state: a.state,
+            true_actions: if a.true_actions {
+                Some(
+                    a.truth
+                        .clone()
+                        .context("--true-actions reads the true actions from --truth FILE")?,
+                )
+            } else {
+                None
+            },
         },
     )?;
     let (seqs, frames) = set.size();
@@ -266,7 +280,12 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
              tell the translated frames apart: train the A-CycleGAN longer (check `milv-train eval-translation`)."
         );
     }
-    if a.variant != Variant::Daml {
+    if a.true_actions {
+        eprintln!(
+            "milv-train meta: --true-actions: the targets are the true robot actions of each human demo's \
+             pair in --truth, not the translator's (a diagnostic; the translator check is skipped)"
+        );
+    } else if a.variant != Variant::Daml {
         let check = check::check_imagined(&ds, version, &set, a.truth.as_deref())?;
         if let Some(fit) = &check.fit {
             eprintln!(
@@ -332,6 +351,7 @@ pub fn cmd_meta(a: MetaArgs) -> anyhow::Result<u8> {
                 second_order: !a.first_order,
                 seed: a.seed,
                 inner_domain: a.inner,
+                true_actions: a.true_actions,
             };
             let info = PolicyMeta {
                 format: String::new(),
@@ -495,6 +515,7 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
         translator_model: info.translator.as_ref().map(|t| t.model_id.clone()),
         meta_steps: info.step,
         state_input: learner.net.cfg.state_dim > 0,
+        true_actions: info.meta.true_actions,
         result,
     };
     if let Some(o) = &a.out {
@@ -507,11 +528,7 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
         println!(
             "{}{} on simulated {} ({} tasks, {} demos): {}/{} = {:.1} % (95 % CI {:.1}–{:.1} %) over {} tasks × {} trials, {} frames",
             variant.label(),
-            if record.state_input {
-                " (+ robot state input)"
-            } else {
-                ""
-            },
+            record.setting_note(),
             family.name(),
             a.split_name(),
             a.demo_name(),
