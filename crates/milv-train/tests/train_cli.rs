@@ -39,10 +39,18 @@ fn trains_resumes_translates_and_evaluates() {
         "3",
         "--truth",
         s(&fx.truth),
+        "--idm-slope",
+        "0.2",
     ]);
     args.extend(TINY);
     let rep = json(&args);
     assert_eq!(rep["step"], 6);
+    // π_I's activation is part of the model: stored with every checkpoint.
+    let meta: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(runs.join("checkpoints/step-00000006/checkpoint.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(meta["model"]["idm_slope"], 0.2);
     let lines = std::fs::read_to_string(runs.join("losses.jsonl")).unwrap();
     assert_eq!(lines.lines().count(), 6);
     let first: serde_json::Value = serde_json::from_str(lines.lines().next().unwrap()).unwrap();
@@ -162,6 +170,11 @@ fn corrupt_checkpoints_and_missing_random_videos_are_clear_errors() {
 
     let other = tempfile::tempdir().unwrap();
     let fx = common::sim_dataset(other.path(), 2, true);
+    let mut bad = fresh_run(&fx.root, &runs);
+    bad.extend(["--idm-slope", "1.5"]);
+    let (code, _, err) = run(&bad);
+    assert_ne!(code, 0);
+    assert!(err.contains("slope 1.5"), "{err}");
     let mut args = vec!["cyclegan", s(&fx.root), "--out", s(&runs), "--steps", "2"];
     args.extend(TINY);
     json(&args);

@@ -19,6 +19,12 @@ pub struct ModelConfig {
     pub idm_hidden: i64,
     /// Action width (Δx, Δy).
     pub action_dim: i64,
+    /// Negative slope of π_I's conv activations: 0 is a ReLU (the paper's, and every
+    /// checkpoint written before this field). A leaky one keeps a gradient when every
+    /// unit of a conv is negative: with a ReLU π_I can die for good (its spatial softmax
+    /// then sees a flat map, whose expected positions are exactly 0) and predict a constant.
+    #[serde(default)]
+    pub idm_slope: f64,
 }
 
 impl Default for ModelConfig {
@@ -31,6 +37,7 @@ impl Default for ModelConfig {
             idm_filters: 16,
             idm_hidden: 100,
             action_dim: 2,
+            idm_slope: 0.0,
         }
     }
 }
@@ -46,6 +53,7 @@ impl ModelConfig {
             idm_filters: 4,
             idm_hidden: 16,
             action_dim: 2,
+            idm_slope: 0.0,
         }
     }
 
@@ -60,6 +68,12 @@ impl ModelConfig {
             return Err(crate::Error::Config(format!(
                 "image size {} must be a multiple of 8, at least 32",
                 self.image_size
+            )));
+        }
+        if !(0.0..1.0).contains(&self.idm_slope) {
+            return Err(crate::Error::Config(format!(
+                "inverse-dynamics slope {} must be in [0, 1)",
+                self.idm_slope
             )));
         }
         if self.enc_widths.iter().any(|&w| w < 1) || self.disc_width < 1 || self.action_dim < 1 {

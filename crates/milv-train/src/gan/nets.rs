@@ -202,6 +202,8 @@ pub struct InverseDynamics {
     c0: nn::Conv2D,
     c1: nn::Conv2D,
     fc: Vec<nn::Linear>,
+    /// Negative slope of the conv activations ([`ModelConfig::idm_slope`]).
+    slope: f64,
 }
 
 impl InverseDynamics {
@@ -216,6 +218,7 @@ impl InverseDynamics {
                 nn::linear(p / "fc1", hdim, hdim, Default::default()),
                 nn::linear(p / "out", hdim, cfg.action_dim, Default::default()),
             ],
+            slope: cfg.idm_slope,
         }
     }
 
@@ -223,9 +226,9 @@ impl InverseDynamics {
     pub fn forward(&self, z_t: &Tensor, z_next: &Tensor) -> Tensor {
         let h = Tensor::cat(&[z_t, z_next], 1)
             .apply(&self.c0)
-            .relu()
+            .leaky_relu_with(self.slope)
             .apply(&self.c1)
-            .relu();
+            .leaky_relu_with(self.slope);
         let last = self.fc.len() - 1;
         self.fc.iter().enumerate().fold(spatial_softmax(&h), |h, (i, l)| {
             let h = h.apply(l);
@@ -266,5 +269,31 @@ mod tests {
         assert_eq!(p.size(), [1, 6]);
         // A uniform map's expected position is the centre.
         assert!(p.abs().max().double_value(&[]) < 1e-6);
+    }
+
+    /// A π_I whose first conv is all negative (its units dead) gets no gradient into its
+    /// conv weights with a ReLU — it predicts a constant for ever — and does with a
+    /// leaky activation.
+    #[test]
+    fn a_dead_inverse_dynamics_recovers_only_with_a_leaky_activation() {
+        let _serial = crate::testing::torch_rng();
+        let grad_of_c0 = |slope: f64| -> f64 {
+            let cfg = ModelConfig {
+                idm_slope: slope,
+                ..ModelConfig::tiny(32)
+            };
+            let vs = nn::VarStore::new(Device::Cpu);
+            let idm = InverseDynamics::new(&(vs.root() / "i"), &cfg);
+            tch::no_grad(|| {
+                let _ = idm.c0.bs.as_ref().unwrap().shallow_clone().fill_(-100.0);
+            });
+            let [c, h, w] = cfg.latent_shape();
+            let z = Tensor::rand([4, c, h, w], (Kind::Float, Device::Cpu));
+            let loss = (idm.forward(&z, &(&z * 0.5)) - 1.0).square().mean(Kind::Float);
+            loss.backward();
+            idm.c0.ws.grad().abs().sum(Kind::Float).double_value(&[])
+        };
+        assert_eq!(grad_of_c0(0.0), 0.0);
+        assert!(grad_of_c0(0.2) > 0.0);
     }
 }

@@ -8,6 +8,7 @@ use std::sync::Arc;
 use anyhow::{Context, bail};
 use milv_cli as cli;
 use milv_data::{CommitMeta, Dataset, DatasetRef, Partition};
+use milv_train::ModelConfig;
 use milv_train::gan::checkpoint;
 use milv_train::gan::data::{DataOptions, TrainingSet};
 use milv_train::gan::eval::{EvalSet, evaluate_translation};
@@ -48,6 +49,10 @@ pub(crate) struct TrainArgs {
     /// Inverse-dynamics learning rate.
     #[arg(long, default_value_t = 0.01)]
     lr_idm: f64,
+    /// Negative slope of π_I's conv activations (0: a ReLU, the paper's). With a ReLU π_I
+    /// can die and predict a constant for good; 0.2 keeps a gradient (RESULTS.md, ladder R5).
+    #[arg(long, default_value_t = 0.0)]
+    idm_slope: f64,
     /// Cycle-consistency weight λ.
     #[arg(long, default_value_t = 10.0)]
     lambda_cyc: f64,
@@ -215,7 +220,10 @@ pub(crate) fn cmd_train_cyclegan(a: TrainArgs) -> anyhow::Result<u8> {
             run
         }
         None => {
-            let model = model_config(a.tiny, a.size);
+            let model = ModelConfig {
+                idm_slope: a.idm_slope,
+                ..model_config(a.tiny, a.size)
+            };
             let train_cfg = TrainConfig {
                 steps: a.steps,
                 batch: a.batch,
