@@ -7,13 +7,19 @@
 # WStable, MILV) meta-train from pinned versions; each is evaluated one-shot in milv-sim
 # on the held-out tasks; the success tables (the paper's Tables 1 and 2) are written.
 #
-# usage: tools/reproduce.sh small|full [--out DIR]
-#   small  this 2-core CPU machine in under 2 hours: 64×64 frames, 30 tasks per family,
-#          short trainings, 5 trials per held-out task
-#   full   the paper's scale, for a GPU: 128×128, 1,320 drawing / 1,000 pushing demos,
-#          long trainings, 50 trials per task (set DEVICE=cpu to force the CPU)
-# Any setting can be overridden from the environment (SIZE, EPISODES, ACG_STEPS,
-# META_STEPS, TRIALS, SEEDS, THREADS, DEVICE, FAMILIES, ALLOW_WEAK_TRANSLATOR).
+# usage: tools/reproduce.sh small|medium|full [--out DIR]
+#   small   this 2-core CPU machine in under 2 hours (release binaries, after the build):
+#           64×64 frames, 300 task instances per family, 1,500 A-CycleGAN and 1,500 meta
+#           steps, 4 trials per held-out task × seeds 0,1 (96 drawing / 64 pushing trials)
+#   medium  the same data with the ladder's training lengths (4,500 meta steps, 3,000
+#           A-CycleGAN steps): about 5 hours here
+#   full    the paper's scale, for a GPU: 128×128, 1,320 drawing / 1,000 pushing demos,
+#           long trainings, 25 trials per task × 2 seeds (set DEVICE=cpu to force the CPU)
+# π_I trains with 8 transitions per step at lr 1e-3 and a leaky activation (IDM_ARGS):
+# with the paper's batch 1, lr 0.01 and ReLU it predicts a constant at 64 px (RESULTS.md,
+# ladder R5). Any setting can be overridden from the environment (SIZE, EPISODES,
+# ACG_STEPS, META_STEPS, TRIALS, SEEDS, THREADS, DEVICE, FAMILIES, IDM_ARGS,
+# ALLOW_WEAK_TRANSLATOR, MILV_BIN).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scale=${1:-}
@@ -27,17 +33,25 @@ while [ $# -gt 0 ]; do
 done
 case $scale in
   small)
-    : "${SIZE:=64}" "${EPISODES:=30}" "${ACG_STEPS:=1000}" "${META_STEPS:=600}"
-    : "${TRIALS:=5}" "${SEEDS:=0}" "${THREADS:=2}" "${DEVICE:=cpu}" ;;
+    : "${SIZE:=64}" "${EPISODES:=300}" "${ACG_STEPS:=1500}" "${META_STEPS:=1500}"
+    : "${TRIALS:=4}" "${SEEDS:=0,1}" "${THREADS:=2}" "${DEVICE:=cpu}" ;;
+  medium)
+    : "${SIZE:=64}" "${EPISODES:=300}" "${ACG_STEPS:=3000}" "${META_STEPS:=4500}"
+    : "${TRIALS:=4}" "${SEEDS:=0,1}" "${THREADS:=2}" "${DEVICE:=cpu}" ;;
   full)
     : "${SIZE:=128}" "${EPISODES:=}" "${ACG_STEPS:=50000}" "${META_STEPS:=30000}"
     : "${TRIALS:=25}" "${SEEDS:=0,1}" "${THREADS:=8}" "${DEVICE:=auto}" ;;
-  *) echo "usage: tools/reproduce.sh small|full [--out DIR]" >&2; exit 2 ;;
+  *) echo "usage: tools/reproduce.sh small|medium|full [--out DIR]" >&2; exit 2 ;;
 esac
 : "${FAMILIES:=drawing pushing}"
 out=${out:-out/reproduce-$scale}
+: "${IDM_ARGS:=--idm-batch 8 --lr-idm 0.001 --idm-slope 0.2}"
 tools/setup.sh
-B=$PWD/target/debug
+# Release binaries: the trainings run several times faster than in a debug build.
+if [ -z "${MILV_BIN:-}" ]; then
+  cargo build --release --locked -p milv -p milv-train --bins --quiet
+fi
+B=${MILV_BIN:-$PWD/target/release}
 mkdir -p "$out"
 log="$out/reproduce.log"
 : > "$log"
@@ -67,7 +81,7 @@ for fam in $FAMILIES; do
     [ "$kind" = decoupled ] && flag=(--decoupled)
     say "$fam: A-CycleGAN $kind, $ACG_STEPS steps"
     "$B/milv-train" cyclegan "$ds" --out "$F/acg-$kind" --size "$SIZE" --steps "$ACG_STEPS" \
-      --idm-batch 8 --lr-idm 0.001 --alignment motion --checkpoint-every "$ACG_STEPS" \
+      $IDM_ARGS --alignment motion --checkpoint-every "$ACG_STEPS" \
       --grid-every "$ACG_STEPS" "${flag[@]}" "${rt[@]}" | tee -a "$log"
     ckpt=$(ls -d "$F/acg-$kind"/checkpoints/step-* | tail -1)
     echo "$ckpt" > "$F/acg-$kind/checkpoint.txt"

@@ -285,7 +285,9 @@ mod tests {
             let vs = nn::VarStore::new(Device::Cpu);
             let idm = InverseDynamics::new(&(vs.root() / "i"), &cfg);
             tch::no_grad(|| {
-                let _ = idm.c0.bs.as_ref().unwrap().shallow_clone().fill_(-100.0);
+                if let Some(b) = &idm.c0.bs {
+                    let _ = b.shallow_clone().fill_(-100.0);
+                }
             });
             let [c, h, w] = cfg.latent_shape();
             let z = Tensor::rand([4, c, h, w], (Kind::Float, Device::Cpu));
