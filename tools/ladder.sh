@@ -17,7 +17,8 @@
 #           r4    r3's policy on held-out tasks (reports in r3/)
 #           r5    π_I on translated human demos: adds a held-out split (R5_EPISODES test
 #                 instances, seed 22) and the alignments to the dataset, trains the coupled
-#                 A-CycleGAN (ACG_STEPS, 2000), translates, reports π_I's imagined actions
+#                 A-CycleGAN (ACG_STEPS, 2000; π_I with 8 transitions a step, lr 1e-3 and a
+#                 leaky activation), translates, reports π_I's imagined actions
 #                 on held-out human demos against the true ones, scores and curates
 #           r6    MILV on r5's imagined latents with the TRUE robot actions
 #                 (`meta --true-actions`), held-out tasks, own and swapped demos
@@ -143,7 +144,7 @@ for r in "${rungs[@]}"; do
       resume=()
       ls "$F/r5/acg/checkpoints"/step-* >/dev/null 2>&1 && resume=(--resume)
       "$B/milv-train" cyclegan "$ds" --out "$F/r5/acg" --size "$SIZE" --steps "$ACG_STEPS" "${resume[@]}" \
-        --idm-batch 8 --lr-idm 0.001 --alignment motion --checkpoint-every 500 --eval-every 500 \
+        --idm-batch 8 --lr-idm 0.001 --idm-slope 0.2 --alignment motion --checkpoint-every 500 --eval-every 500 \
         --grid-every "$ACG_STEPS" --truth "$gt" --eval-pairs 12 ${ACG_ARGS:-} "${rt[@]}" --json > "$F/r5/acg.json"
       ckpt=$(ls -d "$F/r5/acg/checkpoints"/step-* | sort -t- -k2 -n | tail -1)
       "$B/milv-train" translate "$ds" --checkpoint "$ckpt" "${rt[@]}" --json > "$F/r5/translate.json"
