@@ -77,6 +77,21 @@ fn translator(ds: &Path, out: &Path, decoupled: bool) -> (PathBuf, u64) {
     (ckpt, cur.version)
 }
 
+/// `eval RUN` with one trial per training task, as JSON.
+fn eval_once_on_training_tasks(run: &Path) -> serde_json::Value {
+    json(&[
+        "eval",
+        s(run),
+        "--trials",
+        "1",
+        "--split",
+        "train",
+        "--threads",
+        "1",
+        "--json",
+    ])
+}
+
 const TINY: [&str; 5] = ["--tiny", "--threads", "1", "--json", "--checkpoint-every"];
 
 #[test]
@@ -265,17 +280,7 @@ fn wrong_translators_and_missing_inputs_are_clear_errors() {
         truth.iter().zip(&imagined).all(|(t, i)| *t > 0.1 && t != i),
         "true {truth:?} vs imagined {imagined:?}"
     );
-    let ev = json(&[
-        "eval",
-        s(&truth_run),
-        "--trials",
-        "1",
-        "--split",
-        "train",
-        "--threads",
-        "1",
-        "--json",
-    ]);
+    let ev = eval_once_on_training_tasks(&truth_run);
     assert_eq!(ev["true_actions"], true, "{ev}");
     // A human demo the truth file does not pair is an error naming the file and the demo.
     let partial = dir.path().join("partial_truth.jsonl");
@@ -537,17 +542,7 @@ fn daml_inner_loop_flags_visibility_and_evaluation_options() {
     let norm = meta["policy"]["state_norm"].as_array().unwrap();
     assert_eq!(norm.len(), 2);
     assert!(norm.iter().all(|m| m[1].as_f64().unwrap() > 0.1), "{norm:?}");
-    let ev = json(&[
-        "eval",
-        s(&st),
-        "--trials",
-        "1",
-        "--split",
-        "train",
-        "--threads",
-        "1",
-        "--json",
-    ]);
+    let ev = eval_once_on_training_tasks(&st);
     assert_eq!(ev["state_input"], true);
     assert!(ev["loss_pre"].as_f64().unwrap() > 0.0);
     let (code, _, err) = run(&[

@@ -192,11 +192,9 @@ impl MetaSet {
                         .into(),
                 ));
             }
-            set.use_true_actions(ds, v, &eps, path)?;
-            parts.push(format!(
-                "true-actions={}",
-                std::fs::read_to_string(path).unwrap_or_default()
-            ));
+            let pairs = set.use_true_actions(ds, v, &eps, path)?;
+            parts.push("true-actions".into());
+            parts.extend(pairs);
         }
         if opts.with_state {
             set.attach_states(ds, v)?;
@@ -422,14 +420,15 @@ impl MetaSet {
 
     /// Replaces every sequence's imagined actions with the true actions of its human demo's
     /// ground-truth robot demo (`truth`, see [`truth_pairs`]). A demo without a pair, or
-    /// whose pair differs in length, is an error naming both.
+    /// whose pair differs in length, is an error naming both. Returns the pairs used, as
+    /// `human=robot`, for the data digest.
     fn use_true_actions(
         &mut self,
         ds: &Dataset,
         v: u64,
         eps: &[Episode],
         truth: &std::path::Path,
-    ) -> Result<()> {
+    ) -> Result<Vec<String>> {
         let pairs: BTreeMap<String, String> = truth_pairs(eps, truth)?.into_iter().collect();
         let wanted: BTreeSet<&String> = self
             .seqs
@@ -442,6 +441,7 @@ impl MetaSet {
             .map(|e| (e.episode_id.clone(), e.clone()))
             .collect();
         let clips = load_clips(ds, v, &robots, true)?;
+        let mut used = Vec::with_capacity(self.seqs.len());
         for seq in &mut self.seqs {
             let id = &seq.episode_id;
             let clip = pairs.get(id).and_then(|r| clips.get(r)).ok_or_else(|| {
@@ -465,13 +465,14 @@ impl MetaSet {
                 })?;
             let flat: Vec<f32> = acts.iter().flatten().copied().collect();
             seq.actions = Some(Tensor::from_slice(&flat).view([n, -1]));
+            used.push(format!("{id}={}", clip.episode_id));
         }
         self.action_dim = self
             .seqs
             .first()
             .and_then(|s| s.actions.as_ref())
             .map_or(0, |a| a.size()[1]);
-        Ok(())
+        Ok(used)
     }
 
     /// `--state`: the robot's state along every outer sequence, standardised over them all.
