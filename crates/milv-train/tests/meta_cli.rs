@@ -191,6 +191,54 @@ fn every_variant_meta_trains_resumes_and_is_evaluated_one_shot() {
     assert_ne!(code, 0);
     assert!(err.contains("--resume"), "{err}");
 
+    // Packs evaluate as their checkpoints did, from wherever they are moved to: DAML's
+    // exactly (f32), MILV's with the translator in f16 within rounding.
+    for (variant, half) in [("daml", false), ("milv", true)] {
+        let packed = dir.path().join("packs").join(variant);
+        let mut args = vec![
+            "pack",
+            s(&dir.path().join(variant)),
+            "--out",
+            s(&packed),
+            "--json",
+        ];
+        if half {
+            args.push("--half");
+        }
+        let rep = json(&args);
+        assert_eq!(rep["variant"], variant);
+        assert_eq!(rep["half_translator"], half);
+        assert_eq!(packed.join("translator").is_dir(), variant == "milv");
+        assert!(!packed.join("state.safetensors").exists());
+        let moved = dir.path().join(format!("moved-{variant}"));
+        std::fs::rename(&packed, &moved).unwrap();
+        let ev = json(&["eval", s(&moved), "--trials", "1", "--threads", "1", "--json"]);
+        let before: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join(format!("{variant}.json"))).unwrap())
+                .unwrap();
+        assert_eq!(ev["trials"], before["trials"]);
+        for k in ["loss_pre", "loss_post"] {
+            let (a, b) = (ev[k].as_f64().unwrap(), before[k].as_f64().unwrap());
+            if half {
+                assert!((a - b).abs() <= 0.02 * b, "{variant} {k}: {a} vs {b}");
+            } else {
+                assert_eq!(a, b, "{variant} {k}");
+            }
+        }
+        if !half {
+            assert_eq!(ev["successes"], before["successes"]);
+        }
+    }
+    // A pack whose networks were edited is refused, naming the pack.
+    let g = dir.path().join("moved-milv/translator/G.safetensors");
+    let mut bytes = std::fs::read(&g).unwrap();
+    let n = bytes.len();
+    bytes[n - 1] ^= 0x55;
+    std::fs::write(&g, bytes).unwrap();
+    let (code, _, err) = run(&["eval", s(&dir.path().join("moved-milv")), "--trials", "1"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("corrupt") && err.contains("moved-milv"), "{err}");
+
     let mut args = vec!["table"];
     args.extend(reports.iter().map(|p| s(p)));
     let (code, md, err) = run(&args);

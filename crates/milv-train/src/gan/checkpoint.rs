@@ -3,15 +3,19 @@
 //! `checkpoint.json` (configs, step, the dataset version and data digest it trained on,
 //! and the model id). Written to a temporary folder and renamed, so a crash never leaves
 //! a half checkpoint that looks whole.
+//!
+//! A *packed* translator ([`pack_translator`]) keeps only what a policy's one-shot
+//! evaluation runs, G and F, optionally in f16, with `translator.json` naming the model
+//! id of the checkpoint it came from; [`load_translation`] reads either kind.
 
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
-use tch::{Device, Tensor};
+use tch::{Device, Kind, Tensor};
 
 use crate::gan::config::{ModelConfig, TrainConfig};
-use crate::gan::cyclegan::{ACycleGan, NET_FILES};
+use crate::gan::cyclegan::{ACycleGan, NET_FILES, Nets};
 use crate::run::DataRef;
 use crate::run::folder::{latest_with, read_json_format, write_dir, write_json};
 use crate::{Error, Result};
@@ -110,4 +114,124 @@ pub fn load(dir: &Path, device: Device) -> Result<(ACycleGan, CheckpointMeta)> {
 /// The newest complete checkpoint under `dir` (a run's `checkpoints/`), if any.
 pub fn latest(dir: &Path) -> Result<Option<PathBuf>> {
     latest_with(dir, "checkpoint.json")
+}
+
+const PACK_FORMAT: &str = "milv-translator-pack/1";
+
+/// The networks a packed translator keeps: evaluation translates with G and encodes
+/// with F's encoder; the discriminators, π_I and the optimizer state stay behind.
+const PACK_NETS: [&str; 2] = ["G", "F"];
+
+/// `translator.json` of a packed translator.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct PackedTranslator {
+    pub format: String,
+    pub model: ModelConfig,
+    pub decoupled: bool,
+    /// The model id of the checkpoint it was packed from (what policies record).
+    pub model_id: String,
+    /// sha256 of the packed G and F files, checked on load.
+    pub files_digest: String,
+    /// Whether the weights are stored as f16 (they load back into f32 networks).
+    pub half: bool,
+    pub source_step: u64,
+    pub tool_version: String,
+}
+
+fn digest_files(dir: &Path, names: &[&str]) -> Result<String> {
+    let mut h = Sha256::new();
+    for name in names {
+        let path = dir.join(format!("{name}.safetensors"));
+        h.update(std::fs::read(&path).map_err(Error::io("read", &path))?);
+    }
+    Ok(h.finalize().iter().take(8).map(|b| format!("{b:02x}")).collect())
+}
+
+/// Copies the safetensors file `src` to `dst`, converting floating tensors to f16 when
+/// `half` (tch loads them back into f32 variables by copying, which casts).
+pub fn copy_tensors(src: &Path, dst: &Path, half: bool) -> Result<()> {
+    if !half {
+        std::fs::copy(src, dst).map_err(Error::io("copy", dst))?;
+        return Ok(());
+    }
+    let named = Tensor::read_safetensors(src).map_err(Error::tensors(src))?;
+    let named: Vec<(String, Tensor)> = named
+        .into_iter()
+        .map(|(k, t)| {
+            let t = if t.is_floating_point() {
+                t.to_kind(Kind::Half)
+            } else {
+                t
+            };
+            (k, t)
+        })
+        .collect();
+    Tensor::write_safetensors(&named, dst).map_err(Error::tensors(dst))
+}
+
+/// Writes the translation half of checkpoint `src` (G and F) into the folder `out`,
+/// which must not exist yet (callers pack into a temporary folder they rename).
+pub fn pack_translator(src: &Path, out: &Path, half: bool) -> Result<PackedTranslator> {
+    let meta = read_meta(src)?;
+    let actual = model_id(src)?;
+    if actual != meta.model_id {
+        return Err(Error::checkpoint(
+            format!(
+                "the network files are model {actual}, checkpoint.json records {}",
+                meta.model_id
+            ),
+            src,
+        ));
+    }
+    std::fs::create_dir(out).map_err(Error::io("create folder", out))?;
+    for name in PACK_NETS {
+        let file = format!("{name}.safetensors");
+        copy_tensors(&src.join(&file), &out.join(&file), half)?;
+    }
+    let packed = PackedTranslator {
+        format: PACK_FORMAT.into(),
+        model: meta.model,
+        decoupled: meta.train.decoupled,
+        model_id: meta.model_id,
+        files_digest: digest_files(out, &PACK_NETS)?,
+        half,
+        source_step: meta.step,
+        tool_version: milv_data::TOOL_VERSION.into(),
+    };
+    write_json(&out.join("translator.json"), &packed)?;
+    Ok(packed)
+}
+
+/// The networks of a translator for translating and encoding (G and F loaded; the
+/// others at their initial values), and its model id: from a full checkpoint folder or
+/// a packed one.
+pub fn load_translation(dir: &Path, device: Device) -> Result<(Nets, String)> {
+    if !dir.join("translator.json").is_file() {
+        let (run, meta) = load(dir, device)?;
+        return Ok((run.nets, meta.model_id));
+    }
+    let p: PackedTranslator = read_json_format(
+        &dir.join("translator.json"),
+        "a packed translator",
+        PACK_FORMAT,
+        |m: &PackedTranslator| &m.format,
+    )?;
+    let actual = digest_files(dir, &PACK_NETS)?;
+    if actual != p.files_digest {
+        return Err(Error::checkpoint(
+            format!(
+                "G and F do not match translator.json (digest {actual}, recorded {}): the pack is \
+                 corrupt or was edited",
+                p.files_digest
+            ),
+            dir,
+        ));
+    }
+    p.model.validate()?;
+    let mut nets = Nets::new(&p.model, p.decoupled, device);
+    for (vs, name) in [(&mut nets.vs_g, "G"), (&mut nets.vs_f, "F")] {
+        let path = dir.join(format!("{name}.safetensors"));
+        vs.load(&path).map_err(Error::tensors(&path))?;
+    }
+    Ok((nets, p.model_id))
 }

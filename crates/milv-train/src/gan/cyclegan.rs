@@ -472,4 +472,58 @@ mod tests {
         assert!(same(&straight.nets.dx.forward(&y), &resumed.nets.dx.forward(&y)));
         assert_eq!(straight.pool_x.len(), resumed.pool_x.len());
     }
+
+    #[test]
+    fn a_packed_translator_translates_as_its_checkpoint_did() {
+        let _serial = crate::testing::torch_rng();
+        let dir = tempfile::tempdir().unwrap();
+        let data = crate::run::DataRef {
+            uri: "ds".into(),
+            version: 3,
+            digest: "d".into(),
+            alignment_run: None,
+        };
+        let mut r = run(false, 2e-4);
+        r.step(&batch(32, 10));
+        let ckpt = crate::gan::checkpoint::save(&r, &data, dir.path()).unwrap();
+        let x = r.images(&batch(32, 11).x);
+        let (g, z) = (r.nets.g.forward(&x), r.nets.f.encode(&x));
+        for half in [false, true] {
+            let out = dir.path().join(format!("pack-{half}"));
+            let p = crate::gan::checkpoint::pack_translator(&ckpt, &out, half).unwrap();
+            let (nets, id) = crate::gan::checkpoint::load_translation(&out, Device::Cpu).unwrap();
+            assert_eq!(id, crate::gan::checkpoint::read_meta(&ckpt).unwrap().model_id);
+            assert_eq!(p.half, half);
+            let (g2, z2) = (nets.g.forward(&x), nets.f.encode(&x));
+            if half {
+                // f16 weights: the outputs move by rounding only.
+                let err = |a: &Tensor, b: &Tensor| (a - b).abs().max().double_value(&[]);
+                assert!(
+                    err(&g, &g2) < 2e-2 && err(&z, &z2) < 2e-2,
+                    "{} {}",
+                    err(&g, &g2),
+                    err(&z, &z2)
+                );
+                assert!(!g.equal(&g2));
+            } else {
+                assert!(g.equal(&g2) && z.equal(&z2));
+            }
+        }
+        let full_size = std::fs::metadata(ckpt.join("G.safetensors")).unwrap().len();
+        let half_size = std::fs::metadata(dir.path().join("pack-true/G.safetensors"))
+            .unwrap()
+            .len();
+        assert!(half_size < full_size * 6 / 10, "{half_size} vs {full_size}");
+        // A pack whose file changed is refused.
+        let g_file = dir.path().join("pack-false/F.safetensors");
+        let mut bytes = std::fs::read(&g_file).unwrap();
+        let n = bytes.len();
+        bytes[n - 2] ^= 0x11;
+        std::fs::write(&g_file, bytes).unwrap();
+        let e = crate::gan::checkpoint::load_translation(&dir.path().join("pack-false"), Device::Cpu)
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("corrupt"), "{e}");
+    }
 }

@@ -4,6 +4,11 @@
 //! A run folder holds `losses.jsonl` (one line per step) and `checkpoints/step-N/` with
 //! `policy.safetensors` (θ and ψ), `state.safetensors` (Adam's moments) and
 //! `policy.json` ([`PolicyMeta`]: configs, the data and the translator it trained on).
+//!
+//! [`pack`] writes a policy for sharing: `policy.json` (format `milv-meta-pack/1`),
+//! `policy.safetensors` and, for the variants that read translated frames, `translator/`
+//! (G and F, [`crate::gan::checkpoint::pack_translator`]), which `policy.json` names by
+//! a path relative to the pack. A pack evaluates like a checkpoint; it cannot resume.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -18,6 +23,7 @@ use crate::run::log::{append_json, truncate_after};
 use crate::{Error, Result};
 
 const FORMAT: &str = "milv-meta/1";
+const PACK_FORMAT: &str = "milv-meta-pack/1";
 
 /// The A-CycleGAN a policy's inputs come from (all variants but DAML).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -82,30 +88,114 @@ pub fn read_meta(path: &Path) -> Result<(PathBuf, PolicyMeta)> {
             )
         })?
     };
-    let meta: PolicyMeta = crate::run::folder::read_json_format(
+    let mut meta: PolicyMeta = crate::run::folder::read_json_formats(
         &dir.join("policy.json"),
         "a policy checkpoint",
-        FORMAT,
+        &[FORMAT, PACK_FORMAT],
         |m: &PolicyMeta| &m.format,
     )?;
-    for f in ["policy.safetensors", "state.safetensors"] {
+    let packed = meta.format == PACK_FORMAT;
+    // A pack has no optimizer state: it is for evaluating, not for resuming.
+    let needed: &[&str] = if packed {
+        &["policy.safetensors"]
+    } else {
+        &["policy.safetensors", "state.safetensors"]
+    };
+    for f in needed {
         if !dir.join(f).is_file() {
             return Err(Error::checkpoint(format!("{f} is missing"), &dir));
         }
     }
+    if packed && let Some(t) = meta.translator.as_mut() {
+        t.checkpoint = dir.join(&t.checkpoint);
+    }
     Ok((dir, meta))
 }
 
-/// Loads a policy checkpoint (or a run folder's newest) onto `device`.
+/// Loads a policy checkpoint (or a run folder's newest, or a pack) onto `device`.
 pub fn load(path: &Path, device: Device) -> Result<(MetaRun, PolicyMeta)> {
     let (dir, meta) = read_meta(path)?;
     let mut run = MetaRun::new(meta.policy.clone(), meta.meta.clone(), device)?;
     run.net.load(&dir.join("policy.safetensors"))?;
-    let sp = dir.join("state.safetensors");
-    let state = Tensor::read_safetensors(&sp).map_err(Error::tensors(&sp))?;
-    run.adam.load_state(state)?;
+    if meta.format == FORMAT {
+        let sp = dir.join("state.safetensors");
+        let state = Tensor::read_safetensors(&sp).map_err(Error::tensors(&sp))?;
+        run.adam.load_state(state)?;
+    }
     run.step = meta.step;
     Ok((run, meta))
+}
+
+/// What [`pack`] wrote.
+#[derive(Clone, Debug, Serialize)]
+pub struct PackReport {
+    pub out: PathBuf,
+    pub variant: String,
+    pub step: u64,
+    pub translator_model: Option<String>,
+    /// Whether the translator's weights were stored as f16.
+    pub half_translator: bool,
+    pub bytes: u64,
+}
+
+/// Packs the policy checkpoint at `policy` (or a run folder's newest) into the folder
+/// `out` (replaced atomically): θ and ψ as trained (f32: the inner step differentiates
+/// through them, and they are small), and the translator's G and F, in f16 when `half`.
+pub fn pack(policy: &Path, out: &Path, half: bool) -> Result<PackReport> {
+    let (dir, meta) = read_meta(policy)?;
+    let name = out
+        .file_name()
+        .and_then(|n| n.to_str())
+        .ok_or_else(|| Error::Config(format!("{} has no folder name to pack into", out.display())))?;
+    let parent = out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let fin = write_dir(parent, name, &mut |tmp| {
+        std::fs::copy(dir.join("policy.safetensors"), tmp.join("policy.safetensors"))
+            .map_err(Error::io("copy", tmp.join("policy.safetensors")))?;
+        let mut m = PolicyMeta {
+            format: PACK_FORMAT.into(),
+            ..meta.clone()
+        };
+        if let Some(t) = m.translator.as_mut() {
+            let packed =
+                crate::gan::checkpoint::pack_translator(&t.checkpoint, &tmp.join("translator"), half)?;
+            if packed.model_id != t.model_id {
+                return Err(Error::checkpoint(
+                    format!(
+                        "the translator there is model {}, but the policy trained on rows of model {}",
+                        packed.model_id, t.model_id
+                    ),
+                    &t.checkpoint,
+                ));
+            }
+            t.checkpoint = PathBuf::from("translator");
+        }
+        write_json(&tmp.join("policy.json"), &m)
+    })?;
+    Ok(PackReport {
+        bytes: folder_bytes(&fin)?,
+        out: fin,
+        variant: meta.variant().name().into(),
+        step: meta.step,
+        translator_model: meta.translator.map(|t| t.model_id),
+        half_translator: half && meta.meta.variant != Variant::Daml,
+    })
+}
+
+fn folder_bytes(dir: &Path) -> Result<u64> {
+    let mut n = 0;
+    for e in std::fs::read_dir(dir).map_err(Error::io("list", dir))? {
+        let e = e.map_err(Error::io("list", dir))?;
+        let md = e.metadata().map_err(Error::io("stat", e.path()))?;
+        n += if md.is_dir() {
+            folder_bytes(&e.path())?
+        } else {
+            md.len()
+        };
+    }
+    Ok(n)
 }
 
 #[derive(Clone, Debug)]

@@ -60,12 +60,27 @@ pub fn read_json_format<T: serde::de::DeserializeOwned>(
     expected: &str,
     format: impl Fn(&T) -> &str,
 ) -> Result<T> {
+    read_json_formats(path, what, &[expected], format)
+}
+
+/// [`read_json_format`] for a file that may be in any of the `expected` formats.
+pub fn read_json_formats<T: serde::de::DeserializeOwned>(
+    path: &Path,
+    what: &str,
+    expected: &[&str],
+    format: impl Fn(&T) -> &str,
+) -> Result<T> {
     let bytes = std::fs::read(path).map_err(Error::io("read", path))?;
     let meta: T =
         serde_json::from_slice(&bytes).map_err(|e| Error::checkpoint(format!("not {what}: {e}"), path))?;
-    if format(&meta) != expected {
+    if !expected.contains(&format(&meta)) {
+        let want = expected
+            .iter()
+            .map(|e| format!("{e:?}"))
+            .collect::<Vec<_>>()
+            .join(" or ");
         return Err(Error::checkpoint(
-            format!("format {:?}, expected {expected:?}", format(&meta)),
+            format!("format {:?}, expected {want}", format(&meta)),
             path,
         ));
     }

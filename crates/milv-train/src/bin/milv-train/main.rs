@@ -26,7 +26,8 @@ milv-train translate ds --checkpoint runs/acg/checkpoints/step-00005000\n  \
 milv-train eval-translation ds --checkpoint runs/acg/checkpoints/step-00005000 --truth sim/ground_truth.jsonl\n  \
 milv-train meta ds@7 --variant milv --translator runs/acg/checkpoints/step-00005000 --out runs/milv\n  \
 milv-train eval runs/milv --trials 10 --seeds 0,1 -o results/milv.json\n  \
-milv-train table results/*.json"
+milv-train table results/*.json\n  \
+milv-train pack runs/milv --out samples/policies/milv --half"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -69,6 +70,9 @@ enum Cmd {
     Eval(meta::EvalArgs),
     /// The paper's Tables 1 and 2 (Markdown) from `eval --out` reports.
     Table(meta::TableArgs),
+    /// Pack a policy for sharing: its weights and the translator's G and F (f16 with
+    /// --half), evaluated with `milv-train eval PACK` like a checkpoint.
+    Pack(meta::PackArgs),
     /// Time second-order meta steps on random data: the tool side of tools/bench/meta_step.py.
     BenchMeta(meta::BenchMetaArgs),
     /// Time A-CycleGAN steps on random data (no dataset): the tool side of
@@ -125,6 +129,7 @@ fn run(c: Cli) -> anyhow::Result<u8> {
         Cmd::Meta(a) => meta::cmd_meta(*a),
         Cmd::Eval(a) => meta::cmd_eval_one_shot(a),
         Cmd::Table(a) => meta::cmd_table(a),
+        Cmd::Pack(a) => meta::cmd_pack(a),
         Cmd::BenchMeta(a) => meta::cmd_bench_meta(a),
         Cmd::BenchStep(a) => gan::cmd_bench_step(a),
         Cmd::BenchLoader(a) => gan::cmd_bench_loader(a),

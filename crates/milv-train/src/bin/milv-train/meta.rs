@@ -165,6 +165,20 @@ pub struct TableArgs {
 }
 
 #[derive(clap::Args, Debug)]
+pub struct PackArgs {
+    /// A policy checkpoint folder, or a run folder (its newest checkpoint).
+    policy: PathBuf,
+    /// The pack's folder (replaced if it exists; written to a temporary folder first).
+    #[arg(long, short)]
+    out: PathBuf,
+    /// Store the translator's G and F as f16 (half the size; the policy stays f32).
+    #[arg(long)]
+    half: bool,
+    #[command(flatten)]
+    rt: Runtime,
+}
+
+#[derive(clap::Args, Debug)]
 pub struct BenchMetaArgs {
     /// latent (64×S/4×S/4, the MILV variants) | image (3×S×S, DAML and FeedImg).
     #[arg(long, default_value = "latent")]
@@ -467,19 +481,18 @@ pub fn cmd_eval_one_shot(a: EvalArgs) -> anyhow::Result<u8> {
     let nets = match (&translator, info.variant()) {
         (_, Variant::Daml) => None,
         (Some(p), _) => {
-            let (acg, m) =
-                checkpoint::load(p, dev).with_context(|| format!("loading translator {}", p.display()))?;
+            let (nets, model_id) = checkpoint::load_translation(p, dev)
+                .with_context(|| format!("loading translator {}", p.display()))?;
             if let Some(t) = &info.translator
-                && t.model_id != m.model_id
+                && t.model_id != model_id
             {
                 bail!(
-                    "{} is model {}, but the policy trained on rows of model {}",
+                    "{} is model {model_id}, but the policy trained on rows of model {}",
                     p.display(),
-                    m.model_id,
                     t.model_id
                 );
             }
-            Some(acg.nets)
+            Some(nets)
         }
         (None, v) => bail!("variant {} needs its translator: pass --translator", v.name()),
     };
@@ -586,6 +599,33 @@ pub fn cmd_table(a: TableArgs) -> anyhow::Result<u8> {
         std::fs::write(o, &md).with_context(|| format!("writing {}", o.display()))?;
     }
     print!("{md}");
+    Ok(cli::EXIT_OK)
+}
+
+pub fn cmd_pack(a: PackArgs) -> anyhow::Result<u8> {
+    a.rt.apply()?;
+    let r = meta_train::pack(&a.policy, &a.out, a.half)
+        .with_context(|| format!("packing policy {}", a.policy.display()))?;
+    if a.rt.json {
+        cli::print_json(&r)?;
+    } else {
+        println!(
+            "packed {} (step {}{}) into {}: {:.2} MB{}",
+            r.variant,
+            r.step,
+            r.translator_model
+                .as_deref()
+                .map(|m| format!(", translator {m}"))
+                .unwrap_or_default(),
+            r.out.display(),
+            r.bytes as f64 / 1e6,
+            if r.half_translator {
+                " (translator in f16)"
+            } else {
+                ""
+            }
+        );
+    }
     Ok(cli::EXIT_OK)
 }
 
