@@ -234,6 +234,40 @@ fn every_variant_meta_trains_resumes_and_is_evaluated_one_shot() {
     let (code, _, err) = run(&["eval", s(&dir.path().join("moved-milv")), "--trials", "1"]);
     assert_ne!(code, 0);
     assert!(err.contains("corrupt") && err.contains("moved-milv"), "{err}");
+    // Policies of one A-CycleGAN share one packed translator (`--translators`), and the
+    // shelf moves as a whole.
+    let shelf = dir.path().join("shelf");
+    for variant in ["wstable", "feedimg"] {
+        let trained = dir.path().join(variant);
+        let (out, shared) = (shelf.join(variant), shelf.join("translators"));
+        let rep = json(&[
+            "pack",
+            s(&trained),
+            "--out",
+            s(&out),
+            "--half",
+            "--translators",
+            s(&shared),
+            "--json",
+        ]);
+        assert!(!out.join("translator").exists());
+        assert!(rep["translator_dir"].as_str().unwrap().contains("translators"));
+    }
+    assert_eq!(std::fs::read_dir(shelf.join("translators")).unwrap().count(), 1);
+    let moved = dir.path().join("shelf-moved");
+    std::fs::rename(&shelf, &moved).unwrap();
+    for variant in ["wstable", "feedimg"] {
+        let ev = json(&[
+            "eval",
+            s(&moved.join(variant)),
+            "--trials",
+            "1",
+            "--threads",
+            "1",
+            "--json",
+        ]);
+        assert_eq!(ev["trials"], 12, "{variant}");
+    }
 
     let mut args = vec!["table"];
     args.extend(reports.iter().map(|p| s(p)));

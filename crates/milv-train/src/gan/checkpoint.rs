@@ -148,7 +148,7 @@ fn digest_files(dir: &Path, names: &[&str]) -> Result<String> {
 }
 
 /// Copies the safetensors file `src` to `dst`, converting floating tensors to f16 when
-/// `half` (tch loads them back into f32 variables by copying, which casts).
+/// `half` ([`load_store`] casts them back).
 pub fn copy_tensors(src: &Path, dst: &Path, half: bool) -> Result<()> {
     if !half {
         std::fs::copy(src, dst).map_err(Error::io("copy", dst))?;
@@ -169,8 +169,8 @@ pub fn copy_tensors(src: &Path, dst: &Path, half: bool) -> Result<()> {
     Tensor::write_safetensors(&named, dst).map_err(Error::tensors(dst))
 }
 
-/// Writes the translation half of checkpoint `src` (G and F) into the folder `out`,
-/// which must not exist yet (callers pack into a temporary folder they rename).
+/// Writes the translation half of checkpoint `src` (G and F) into the folder `out`
+/// (created if missing; callers pack into a temporary folder they rename).
 pub fn pack_translator(src: &Path, out: &Path, half: bool) -> Result<PackedTranslator> {
     let meta = read_meta(src)?;
     let actual = model_id(src)?;
@@ -183,7 +183,7 @@ pub fn pack_translator(src: &Path, out: &Path, half: bool) -> Result<PackedTrans
             src,
         ));
     }
-    std::fs::create_dir(out).map_err(Error::io("create folder", out))?;
+    std::fs::create_dir_all(out).map_err(Error::io("create folder", out))?;
     for name in PACK_NETS {
         let file = format!("{name}.safetensors");
         copy_tensors(&src.join(&file), &out.join(&file), half)?;
@@ -202,6 +202,16 @@ pub fn pack_translator(src: &Path, out: &Path, half: bool) -> Result<PackedTrans
     Ok(packed)
 }
 
+/// Reads a packed translator's `translator.json`.
+pub fn read_packed(dir: &Path) -> Result<PackedTranslator> {
+    read_json_format(
+        &dir.join("translator.json"),
+        "a packed translator",
+        PACK_FORMAT,
+        |m: &PackedTranslator| &m.format,
+    )
+}
+
 /// The networks of a translator for translating and encoding (G and F loaded; the
 /// others at their initial values), and its model id: from a full checkpoint folder or
 /// a packed one.
@@ -210,12 +220,7 @@ pub fn load_translation(dir: &Path, device: Device) -> Result<(Nets, String)> {
         let (run, meta) = load(dir, device)?;
         return Ok((run.nets, meta.model_id));
     }
-    let p: PackedTranslator = read_json_format(
-        &dir.join("translator.json"),
-        "a packed translator",
-        PACK_FORMAT,
-        |m: &PackedTranslator| &m.format,
-    )?;
+    let p = read_packed(dir)?;
     let actual = digest_files(dir, &PACK_NETS)?;
     if actual != p.files_digest {
         return Err(Error::checkpoint(
@@ -229,9 +234,41 @@ pub fn load_translation(dir: &Path, device: Device) -> Result<(Nets, String)> {
     }
     p.model.validate()?;
     let mut nets = Nets::new(&p.model, p.decoupled, device);
-    for (vs, name) in [(&mut nets.vs_g, "G"), (&mut nets.vs_f, "F")] {
-        let path = dir.join(format!("{name}.safetensors"));
-        vs.load(&path).map_err(Error::tensors(&path))?;
+    for (vs, name) in [(&nets.vs_g, "G"), (&nets.vs_f, "F")] {
+        load_store(vs, &dir.join(format!("{name}.safetensors")))?;
     }
     Ok((nets, p.model_id))
+}
+
+/// Loads a safetensors file into `vs` by copying into its variables, so f16 files fill
+/// f32 networks (`VarStore::load` would swap in the f16 tensors); every variable must be
+/// in the file and nothing else.
+pub fn load_store(vs: &tch::nn::VarStore, path: &Path) -> Result<()> {
+    let named = Tensor::read_safetensors(path).map_err(Error::tensors(path))?;
+    let mut vars = vs.variables();
+    if named.len() != vars.len() {
+        return Err(Error::checkpoint(
+            format!("{} tensors, the network has {}", named.len(), vars.len()),
+            path,
+        ));
+    }
+    tch::no_grad(|| {
+        for (k, t) in &named {
+            let v = vars
+                .get_mut(k)
+                .ok_or_else(|| Error::checkpoint(format!("tensor {k} is not in the network"), path))?;
+            if v.size() != t.size() {
+                return Err(Error::checkpoint(
+                    format!(
+                        "tensor {k} has shape {:?}, the network's {:?}",
+                        t.size(),
+                        v.size()
+                    ),
+                    path,
+                ));
+            }
+            v.f_copy_(t).map_err(Error::tensors(path))?;
+        }
+        Ok(())
+    })
 }

@@ -133,6 +133,8 @@ pub struct PackReport {
     pub variant: String,
     pub step: u64,
     pub translator_model: Option<String>,
+    /// The shared translator folder it references (`--translators`), if any.
+    pub translator_dir: Option<PathBuf>,
     /// Whether the translator's weights were stored as f16.
     pub half_translator: bool,
     pub bytes: u64,
@@ -141,7 +143,9 @@ pub struct PackReport {
 /// Packs the policy checkpoint at `policy` (or a run folder's newest) into the folder
 /// `out` (replaced atomically): θ and ψ as trained (f32: the inner step differentiates
 /// through them, and they are small), and the translator's G and F, in f16 when `half`.
-pub fn pack(policy: &Path, out: &Path, half: bool) -> Result<PackReport> {
+/// With `translators`, the translator goes to `translators/<model id>[-f16]/` instead,
+/// written once and shared by every pack naming that folder.
+pub fn pack(policy: &Path, out: &Path, half: bool, translators: Option<&Path>) -> Result<PackReport> {
     let (dir, meta) = read_meta(policy)?;
     let name = out
         .file_name()
@@ -151,6 +155,16 @@ pub fn pack(policy: &Path, out: &Path, half: bool) -> Result<PackReport> {
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
         .unwrap_or(Path::new("."));
+    let shared = match (&meta.translator, translators) {
+        (Some(t), Some(root)) => Some(shared_translator(t, root, half)?),
+        _ => None,
+    };
+    std::fs::create_dir_all(parent).map_err(Error::io("create folder", parent))?;
+    let canonical = |p: &Path| p.canonicalize().map_err(Error::io("resolve", p));
+    let shared_rel = match &shared {
+        Some(s) => Some(relative_to(&canonical(parent)?.join(name), &canonical(s)?)),
+        None => None,
+    };
     let fin = write_dir(parent, name, &mut |tmp| {
         std::fs::copy(dir.join("policy.safetensors"), tmp.join("policy.safetensors"))
             .map_err(Error::io("copy", tmp.join("policy.safetensors")))?;
@@ -159,29 +173,75 @@ pub fn pack(policy: &Path, out: &Path, half: bool) -> Result<PackReport> {
             ..meta.clone()
         };
         if let Some(t) = m.translator.as_mut() {
-            let packed =
-                crate::gan::checkpoint::pack_translator(&t.checkpoint, &tmp.join("translator"), half)?;
-            if packed.model_id != t.model_id {
-                return Err(Error::checkpoint(
-                    format!(
-                        "the translator there is model {}, but the policy trained on rows of model {}",
-                        packed.model_id, t.model_id
-                    ),
-                    &t.checkpoint,
-                ));
-            }
-            t.checkpoint = PathBuf::from("translator");
+            t.checkpoint = match &shared_rel {
+                Some(rel) => rel.clone(),
+                None => {
+                    let p = crate::gan::checkpoint::pack_translator(
+                        &t.checkpoint,
+                        &tmp.join("translator"),
+                        half,
+                    )?;
+                    check_model(&p.model_id, t)?;
+                    PathBuf::from("translator")
+                }
+            };
         }
         write_json(&tmp.join("policy.json"), &m)
     })?;
     Ok(PackReport {
         bytes: folder_bytes(&fin)?,
         out: fin,
+        translator_dir: shared,
         variant: meta.variant().name().into(),
         step: meta.step,
         translator_model: meta.translator.map(|t| t.model_id),
         half_translator: half && meta.meta.variant != Variant::Daml,
     })
+}
+
+fn check_model(packed: &str, t: &Translator) -> Result<()> {
+    if packed != t.model_id {
+        return Err(Error::checkpoint(
+            format!(
+                "the translator there is model {packed}, but the policy trained on rows of model {}",
+                t.model_id
+            ),
+            &t.checkpoint,
+        ));
+    }
+    Ok(())
+}
+
+/// `root/<model id>[-f16]`, packed from `t`'s checkpoint unless a pack of it is there.
+fn shared_translator(t: &Translator, root: &Path, half: bool) -> Result<PathBuf> {
+    let name = format!("{}{}", t.model_id, if half { "-f16" } else { "" });
+    let dir = root.join(&name);
+    if dir.join("translator.json").is_file() {
+        check_model(&crate::gan::checkpoint::read_packed(&dir)?.model_id, t)?;
+        return Ok(dir);
+    }
+    write_dir(root, &name, &mut |tmp| {
+        let p = crate::gan::checkpoint::pack_translator(&t.checkpoint, tmp, half)?;
+        check_model(&p.model_id, t)
+    })
+}
+
+/// `to` as a path relative to the folder `from` (both absolute): what a pack records
+/// so that it can move together with its translators.
+fn relative_to(from: &Path, to: &Path) -> PathBuf {
+    let common = from
+        .components()
+        .zip(to.components())
+        .take_while(|(a, b)| a == b)
+        .count();
+    let mut rel = PathBuf::new();
+    for _ in from.components().skip(common) {
+        rel.push("..");
+    }
+    for c in to.components().skip(common) {
+        rel.push(c);
+    }
+    rel
 }
 
 fn folder_bytes(dir: &Path) -> Result<u64> {

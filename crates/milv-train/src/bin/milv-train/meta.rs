@@ -174,6 +174,11 @@ pub struct PackArgs {
     /// Store the translator's G and F as f16 (half the size; the policy stays f32).
     #[arg(long)]
     half: bool,
+    /// Keep the translator in DIR/<model id>[-f16]/, written once and shared by every
+    /// pack that names the same DIR, instead of inside the pack (policies trained on one
+    /// A-CycleGAN then ship it once).
+    #[arg(long, value_name = "DIR")]
+    translators: Option<PathBuf>,
     #[command(flatten)]
     rt: Runtime,
 }
@@ -604,7 +609,7 @@ pub fn cmd_table(a: TableArgs) -> anyhow::Result<u8> {
 
 pub fn cmd_pack(a: PackArgs) -> anyhow::Result<u8> {
     a.rt.apply()?;
-    let r = meta_train::pack(&a.policy, &a.out, a.half)
+    let r = meta_train::pack(&a.policy, &a.out, a.half, a.translators.as_deref())
         .with_context(|| format!("packing policy {}", a.policy.display()))?;
     if a.rt.json {
         cli::print_json(&r)?;
