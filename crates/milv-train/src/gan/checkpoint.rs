@@ -233,7 +233,7 @@ pub fn load_translation(dir: &Path, device: Device) -> Result<(Nets, String)> {
         ));
     }
     p.model.validate()?;
-    let mut nets = Nets::new(&p.model, p.decoupled, device);
+    let nets = Nets::new(&p.model, p.decoupled, device);
     for (vs, name) in [(&nets.vs_g, "G"), (&nets.vs_f, "F")] {
         load_store(vs, &dir.join(format!("{name}.safetensors")))?;
     }
