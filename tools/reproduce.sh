@@ -5,7 +5,8 @@
 # A-CycleGAN is trained coupled (MILV) and decoupled (DeGI); each translates the human
 # demos; milv-score scores and curates; the five meta-policies (DAML, DeGI, FeedImg,
 # WStable, MILV) meta-train from pinned versions; each is evaluated one-shot in milv-sim
-# on the held-out tasks; the success tables (the paper's Tables 1 and 2) are written.
+# on the held-out tasks and packed under OUT/policies/; the success tables (the paper's
+# Tables 1 and 2) are written.
 #
 # usage: tools/reproduce.sh small|medium|full [--out DIR]
 #   small   this 2-core CPU machine in under 2 hours (release binaries, after the build):
@@ -123,6 +124,10 @@ for fam in $FAMILIES; do
     "$B/milv-train" eval "$F/meta-$variant" --family "$fam" --trials "$TRIALS" --seeds "$SEEDS" \
       -o "$F/eval-$variant.json" "${rt[@]}" | tee -a "$log"
     reports+=("$F/eval-$variant.json")
+    # The policy and its translator's G and F (f16, one copy per A-CycleGAN), ready to
+    # re-check with `milv-train eval` (samples/policies/ holds small's).
+    "$B/milv-train" pack "$F/meta-$variant" --out "$out/policies/$fam-$variant" --half \
+      --translators "$out/policies/translators" | tee -a "$log"
   done
 done
 say "success tables"

@@ -651,3 +651,42 @@ fn daml_inner_loop_flags_visibility_and_evaluation_options() {
     assert_eq!(code, 1);
     assert!(err.contains("--loss-multiplier must be positive"), "{err}");
 }
+
+/// The packed policies of the small tables (`samples/policies/`, RESULTS.md) still load
+/// and evaluate with this build: every pack's files are read, and one through its
+/// shared f16 translator runs a one-trial evaluation.
+#[test]
+fn the_committed_policies_load_and_evaluate() {
+    let shelf = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../samples/policies");
+    let mut packs = 0;
+    for e in std::fs::read_dir(&shelf).unwrap() {
+        let p = e.unwrap().path();
+        if !p.join("policy.json").is_file() {
+            continue;
+        }
+        let (_, meta) = milv_train::meta::train::read_meta(&p).unwrap();
+        if let Some(t) = &meta.translator {
+            let (_, id) = milv_train::gan::checkpoint::load_translation(&t.checkpoint, tch::Device::Cpu)
+                .unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+            assert_eq!(id, t.model_id, "{}", p.display());
+        }
+        packs += 1;
+    }
+    assert_eq!(packs, 10, "five methods × two families");
+    let ev = json(&[
+        "eval",
+        s(&shelf.join("pushing-milv")),
+        "--trials",
+        "1",
+        "--seeds",
+        "0",
+        "--threads",
+        "2",
+        "--json",
+    ]);
+    assert_eq!(
+        (ev["family"].as_str(), ev["trials"].as_u64()),
+        (Some("pushing"), Some(8))
+    );
+    assert!(ev["loss_pre"].as_f64().unwrap().is_finite());
+}
