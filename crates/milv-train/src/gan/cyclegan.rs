@@ -428,16 +428,21 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_checkpoint_round_trips_and_resumes_exactly() {
-        let _serial = crate::testing::torch_rng();
-        let dir = tempfile::tempdir().unwrap();
-        let data = crate::run::DataRef {
+    /// What checkpoints in these tests record as their data.
+    fn test_data_ref() -> crate::run::DataRef {
+        crate::run::DataRef {
             uri: "ds".into(),
             version: 3,
             digest: "d".into(),
             alignment_run: None,
-        };
+        }
+    }
+
+    #[test]
+    fn a_checkpoint_round_trips_and_resumes_exactly() {
+        let _serial = crate::testing::torch_rng();
+        let dir = tempfile::tempdir().unwrap();
+        let data = test_data_ref();
         let batches: Vec<Batch> = (0..6).map(|k| batch(32, 10 + k)).collect();
         let mut straight = run(false, 2e-4);
         for b in &batches {
@@ -477,12 +482,7 @@ mod tests {
     fn a_packed_translator_translates_as_its_checkpoint_did() {
         let _serial = crate::testing::torch_rng();
         let dir = tempfile::tempdir().unwrap();
-        let data = crate::run::DataRef {
-            uri: "ds".into(),
-            version: 3,
-            digest: "d".into(),
-            alignment_run: None,
-        };
+        let data = test_data_ref();
         let mut r = run(false, 2e-4);
         r.step(&batch(32, 10));
         let ckpt = crate::gan::checkpoint::save(&r, &data, dir.path()).unwrap();
