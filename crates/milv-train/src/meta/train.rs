@@ -194,8 +194,8 @@ pub fn pack(policy: &Path, out: &Path, half: bool, translators: Option<&Path>) -
         translator_dir: shared,
         variant: meta.variant().name().into(),
         step: meta.step,
+        half_translator: half && meta.translator.is_some(),
         translator_model: meta.translator.map(|t| t.model_id),
-        half_translator: half && meta.meta.variant != Variant::Daml,
     })
 }
 

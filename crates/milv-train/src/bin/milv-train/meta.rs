@@ -615,7 +615,7 @@ pub fn cmd_pack(a: PackArgs) -> anyhow::Result<u8> {
         cli::print_json(&r)?;
     } else {
         println!(
-            "packed {} (step {}{}) into {}: {:.2} MB{}",
+            "packed {} (step {}{}) into {}: {}{}",
             r.variant,
             r.step,
             r.translator_model
@@ -623,7 +623,7 @@ pub fn cmd_pack(a: PackArgs) -> anyhow::Result<u8> {
                 .map(|m| format!(", translator {m}"))
                 .unwrap_or_default(),
             r.out.display(),
-            r.bytes as f64 / 1e6,
+            cli::human_bytes(r.bytes),
             if r.half_translator {
                 " (translator in f16)"
             } else {
