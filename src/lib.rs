@@ -9,6 +9,7 @@
 //! | [`data`] (`milv-data`) | versioned dataset store: schemas, Delta tables, Parquet shards, maintenance |
 //! | [`video`] (`milv-video`) | FFmpeg decode/encode to RGB frames with timestamps, frame folders, resizing |
 //! | [`ingest`] (`milv-ingest`) | videos + sidecars into the `episodes` and `frames` tables |
+//! | [`lerobot`] (`milv-lerobot`) | LeRobot v3.0 datasets: read for ingest, export, LeRobot-style statistics |
 //! | [`plot`] (`milv-plot`) | PNG charts (histogram, lines, heatmap) with plotters |
 //! | [`quality`] (`milv-quality`) | Brenner, SSIM and β_qua kernels (exact, pure) |
 //! | [`score`] (`milv-score`) | β_qua over a dataset: the `scores` table, curation, reports |
@@ -20,6 +21,7 @@
 pub use milv_align as align;
 pub use milv_data as data;
 pub use milv_ingest as ingest;
+pub use milv_lerobot as lerobot;
 pub use milv_plot as plot;
 pub use milv_quality as quality;
 pub use milv_score as score;

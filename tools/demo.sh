@@ -60,6 +60,21 @@ echo "== milv-export mcap: human | imagined | aligned robot frames, latents, act
 echo "== milv-export rerun: the same as a Rerun recording, worst beta first"
 "$BIN/milv-export" rerun "$DS" --alignment motion --sort beta -o "$OUT/translations.rrd"
 .venv/bin/rerun rrd verify "$OUT/translations.rrd"
+echo "== milv-export lerobot: the imagined frames and their actions as a LeRobot v3.0 dataset (AV1, stats.json)"
+"$BIN/milv-export" lerobot "$DS" --table imagined -o "$OUT/lerobot-imagined"
+echo "== milv-ingest --from-lerobot: and back into a new MILV dataset"
+"$BIN/milv-ingest" "$OUT/from-lerobot" --from-lerobot "$OUT/lerobot-imagined"
+if [ -x .venv-lerobot/bin/python ]; then
+  echo "== LeRobot 0.6.1 itself loads the export (offline)"
+  HF_HUB_OFFLINE=1 HF_LEROBOT_HOME="$OUT/.hf-lerobot" HF_HOME="$OUT/.hf" .venv-lerobot/bin/python - "$OUT/lerobot-imagined" <<'PY'
+from lerobot.datasets.lerobot_dataset import LeRobotDataset
+import sys
+ds = LeRobotDataset("local/imagined", root=sys.argv[1], video_backend="pyav")
+item = ds[0]
+print(f"LeRobotDataset: {ds.num_episodes} episodes, {len(ds)} frames at {ds.fps} fps; "
+      f"item 0: image {tuple(item['observation.image'].shape)}, action {item['action'].tolist()}, task {item['task']!r}")
+PY
+fi
 echo "== milv-ds info"
 "$BIN/milv-ds" info "$DS"
 echo "== milv-ds log"
@@ -85,6 +100,7 @@ Outputs:
   quality plots     $OUT/quality/beta_hist.png, $OUT/quality/beta_curves.png
   an alignment      $OUT/align_$PAIR.png (cost matrix of one human/robot pair, with its path)
   translations      $OUT/translations.mcap (open in Foxglove), $OUT/translations.rrd (.venv/bin/rerun $OUT/translations.rrd)
+  LeRobot           $OUT/lerobot-imagined (LeRobotDataset("local/x", root=...)), re-imported as $OUT/from-lerobot
   read it elsewhere .venv/bin/python -c "import polars as pl; print(pl.read_delta('$DS/frames').head())"
   inspect           target/debug/milv-ds info|log|verify $DS[@VERSION]
   the two domains   samples/contact_sheet.png (rows: human / robot, same motion)

@@ -27,6 +27,19 @@ enum Cmd {
         #[arg(long)]
         json: bool,
     },
+    /// LeRobot's statistics of a pinned version (min, max, mean, std, count, q01, q10,
+    /// q50, q90, q99 per feature; images per channel over /255), as JSON — exactly what
+    /// `milv-export lerobot` writes to meta/stats.json for the same version and table, so
+    /// normalisation constants can never be stale.
+    Stats {
+        dataset: DatasetRef,
+        /// Which rows: frames (recorded), imagined (one model's translations) or curated.
+        #[arg(long, default_value = "frames", value_parser = ["frames", "imagined", "curated"])]
+        table: String,
+        /// Translation model for --table imagined (default: the only one).
+        #[arg(long)]
+        model_id: Option<String>,
+    },
     /// Versions with their command lines, and the Delta table versions each pins.
     Log {
         dataset: DatasetRef,
@@ -179,6 +192,20 @@ fn run(args: Args) -> anyhow::Result<u8> {
             } else {
                 print_info(&info)
             }
+        }
+        Cmd::Stats {
+            dataset,
+            table,
+            model_id,
+        } => {
+            let (ds, v) = open(&dataset)?;
+            let opts = milv::lerobot::ExportOptions {
+                source: table.parse().map_err(anyhow::Error::msg)?,
+                video: false,
+                gop: milv::lerobot::write::DEFAULT_GOP,
+                model_id,
+            };
+            cli::print_json(&milv::lerobot::write::stats(&ds, v, &opts)?)?;
         }
         Cmd::Log { dataset, json } => {
             let (ds, _) = open(&dataset)?;

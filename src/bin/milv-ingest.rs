@@ -31,13 +31,23 @@ enum Encoding {
 #[derive(Parser, Debug)]
 #[command(
     version,
-    after_help = "Examples:\n  milv-ingest data/ds clips/*.mp4 --domain human --task draw/circle\n  milv-ingest data/ds --manifest samples/manifest.jsonl --json\n  milv-ingest data/ds frames_dir/ --fps 10 --domain robot --kind random"
+    after_help = "Examples:\n  milv-ingest data/ds clips/*.mp4 --domain human --task draw/circle\n  milv-ingest data/ds --from-lerobot ~/lerobot/pusht --camera observation.image\n  milv-ingest data/ds --manifest samples/manifest.jsonl --json\n  milv-ingest data/ds frames_dir/ --fps 10 --domain robot --kind random"
 )]
 struct Args {
     /// Dataset folder (created if missing).
     dataset: PathBuf,
     /// Video files or folders of numbered PNG/JPEG frames.
     inputs: Vec<PathBuf>,
+    /// Import every episode of a local LeRobot v3.0 dataset (frames decoded from its
+    /// videos at `from_timestamp + timestamp`, or from its inline images; `action` and
+    /// `observation.state` with their names; the task text as task id). Defaults:
+    /// --domain robot, --task-family <the folder's name>.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["inputs", "manifest", "sidecar", "task", "fps"])]
+    from_lerobot: Option<PathBuf>,
+    /// With --from-lerobot: the camera feature to take frames from (needed when the
+    /// dataset has several; the others are named in each episode's source_uri).
+    #[arg(long, value_name = "KEY", requires = "from_lerobot")]
+    camera: Option<String>,
     /// A manifest listing many inputs (JSON lines or CSV; keys: path, sidecar, domain, kind,
     /// task_id, task_family, pair_id, split, fps). Repeatable.
     #[arg(long)]
@@ -122,8 +132,8 @@ fn run(args: Args) -> anyhow::Result<u8> {
     for m in &args.manifest {
         inputs.extend(milv::ingest::manifest::read(m)?);
     }
-    if inputs.is_empty() {
-        bail!("no inputs: give video files / frame folders or --manifest");
+    if inputs.is_empty() && args.from_lerobot.is_none() {
+        bail!("no inputs: give video files / frame folders, --manifest or --from-lerobot");
     }
     if let Some(s) = &args.sidecar {
         if inputs.len() != 1 {
@@ -138,12 +148,20 @@ fn run(args: Args) -> anyhow::Result<u8> {
         },
         Encoding::Raw => FrameEncoding::Raw,
     };
+    let (mut domain, mut task_family) = (args.domain, args.task_family);
+    if let Some(dir) = &args.from_lerobot {
+        domain.get_or_insert_with(|| "robot".into());
+        if task_family.is_none() {
+            let name = dir.canonicalize().unwrap_or_else(|_| dir.clone());
+            task_family = name.file_name().map(|n| n.to_string_lossy().into_owned());
+        }
+    }
     let opts = IngestOptions {
         defaults: EpisodeMeta {
-            domain: args.domain,
+            domain,
             kind: args.kind,
             task_id: args.task,
-            task_family: args.task_family,
+            task_family,
             pair_id: args.pair_id,
             split: args.split,
             // For frame folders --fps is their rate; videos are resampled to it.
@@ -174,13 +192,11 @@ fn run(args: Args) -> anyhow::Result<u8> {
         episodes: cli::bar(0, "planning"),
         frames: AtomicU64::new(0),
     };
-    let report = milv::ingest::ingest(
-        &ds,
-        &inputs,
-        &opts,
-        CommitMeta::for_this_process("milv-ingest", "ingest"),
-        &bars,
-    )?;
+    let meta = CommitMeta::for_this_process("milv-ingest", "ingest");
+    let report = match &args.from_lerobot {
+        Some(dir) => milv::ingest::ingest_lerobot(&ds, dir, args.camera.as_deref(), &opts, meta, &bars),
+        None => milv::ingest::ingest(&ds, &inputs, &opts, meta, &bars),
+    }?;
     bars.episodes.finish_and_clear();
     if args.json {
         cli::print_json(&report)?;

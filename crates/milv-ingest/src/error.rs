@@ -22,6 +22,8 @@ pub enum Error {
     Video(#[from] milv_video::Error),
     #[error(transparent)]
     Data(#[from] milv_data::Error),
+    #[error(transparent)]
+    LeRobot(#[from] milv_lerobot::Error),
     #[error("frame {index}: {msg}: {path}")]
     Frame { index: u64, msg: String, path: PathBuf },
 }

@@ -5,6 +5,7 @@ use std::cell::Cell;
 use std::collections::{BTreeMap, BTreeSet};
 use std::io::Read as _;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use milv_data::RowBuffer as _;
 use milv_data::frame_codec::{self, FrameEncoding};
@@ -12,6 +13,7 @@ use milv_data::{
     CommitMeta, Dataset, Domain, Episode, FileAdd, FrameRows, InputDigest, Kind, ShardOptions, ShardWriter,
     Split, TableKind,
 };
+use milv_lerobot::{EpisodePlan, LeRobotDataset};
 use milv_video::{DecodeOptions, Frame, Resize};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -117,7 +119,7 @@ impl IngestReport {
 
 /// Metadata of an episode after layering and validation.
 #[derive(Clone, Debug, Serialize)]
-struct Resolved {
+pub(crate) struct Resolved {
     domain: Domain,
     kind: Kind,
     task_id: Option<String>,
@@ -128,13 +130,16 @@ struct Resolved {
     folder_fps: Option<f64>,
 }
 
-struct Planned {
-    source: PathBuf,
-    sidecar: Option<Sidecar>,
-    sidecar_sha256: Option<String>,
-    meta: Resolved,
-    source_sha256: String,
-    episode_id: String,
+pub(crate) struct Planned {
+    pub(crate) source: PathBuf,
+    pub(crate) sidecar: Option<Sidecar>,
+    pub(crate) meta: Resolved,
+    pub(crate) source_sha256: String,
+    pub(crate) episode_id: String,
+    /// The files this episode was made from, for the version's input digests.
+    pub(crate) inputs: Vec<InputDigest>,
+    /// An episode of a LeRobot dataset (its frames come from there, not from `source`).
+    pub(crate) lerobot: Option<Arc<(Arc<LeRobotDataset>, EpisodePlan)>>,
 }
 
 fn hex(bytes: &[u8]) -> String {
@@ -189,7 +194,11 @@ fn parse_choice<T: std::str::FromStr<Err = String>>(path: &Path, v: &str) -> Res
     v.parse().map_err(|msg: String| Error::input(path, msg))
 }
 
-fn resolve_meta(spec: &InputSpec, sidecar: Option<&Sidecar>, defaults: &EpisodeMeta) -> Result<Resolved> {
+pub(crate) fn resolve_meta(
+    spec: &InputSpec,
+    sidecar: Option<&Sidecar>,
+    defaults: &EpisodeMeta,
+) -> Result<Resolved> {
     let side = sidecar.map(|s| s.meta.clone()).unwrap_or_default();
     let m = spec.meta.clone().over(&side.over(defaults));
     let p = &spec.path;
@@ -251,28 +260,53 @@ fn plan_one(spec: &InputSpec, opts: &IngestOptions) -> Result<Planned> {
         ));
     }
     let source_sha256 = source_digest(path)?;
-    // The id covers everything that changes the rows: source, sidecar, metadata, options.
+    let episode_id = episode_id(&source_sha256, sidecar_sha256.as_deref(), &meta, opts, None);
+    let mut inputs = vec![InputDigest {
+        uri: source_name(path),
+        sha256: source_sha256.clone(),
+    }];
+    if let (Some(s), Some(sha)) = (&sidecar, &sidecar_sha256) {
+        inputs.push(InputDigest {
+            uri: source_name(&s.path),
+            sha256: sha.clone(),
+        });
+    }
+    Ok(Planned {
+        source: path.clone(),
+        sidecar,
+        meta,
+        source_sha256,
+        episode_id,
+        inputs,
+        lerobot: None,
+    })
+}
+
+/// The id covers everything that changes the rows: source, sidecar, metadata, options,
+/// and for an episode out of a larger file, which part of it (`origin`).
+pub(crate) fn episode_id(
+    source_sha256: &str,
+    sidecar_sha256: Option<&str>,
+    meta: &Resolved,
+    opts: &IngestOptions,
+    origin: Option<&serde_json::Value>,
+) -> String {
     let mut h = Sha256::new();
     h.update(b"milv-episode/1\0");
     h.update(source_sha256.as_bytes());
-    h.update(sidecar_sha256.as_deref().unwrap_or("-").as_bytes());
-    let options = serde_json::json!({
+    h.update(sidecar_sha256.unwrap_or("-").as_bytes());
+    let mut options = serde_json::json!({
         "meta": meta,
         "resize": opts.resize.map(|r| format!("{}x{}:{}", r.width, r.height, r.policy)),
         "fps": opts.fps,
         "encoding": opts.encoding.name(),
         "jpeg_quality": match opts.encoding { FrameEncoding::Jpeg { quality } => Some(quality), _ => None },
     });
+    if let Some(o) = origin {
+        options["origin"] = o.clone();
+    }
     h.update(options.to_string().as_bytes());
-    let episode_id = hex(&h.finalize())[..32].to_string();
-    Ok(Planned {
-        source: path.clone(),
-        sidecar,
-        sidecar_sha256,
-        meta,
-        source_sha256,
-        episode_id,
-    })
+    hex(&h.finalize())[..32].to_string()
 }
 
 const ENCODE_CHUNK: usize = 16;
@@ -436,7 +470,10 @@ fn ingest_one(
         // faster on 2 cores than FFmpeg frame threads competing with the encoders.
         threads: 1,
     };
-    let source = milv_video::open_frames(&p.source, p.meta.folder_fps, &dopts)?;
+    let source = match &p.lerobot {
+        Some(lr) => lr.0.frames(&lr.1, &dopts)?,
+        None => milv_video::open_frames(&p.source, p.meta.folder_fps, &dopts)?,
+    };
     let info = source.info().clone();
     let side = p.sidecar.as_ref();
     let n_actions = side.and_then(|s| s.actions.as_ref()).map(Vec::len);
@@ -451,7 +488,11 @@ fn ingest_one(
     };
     w.begin_episode()?;
     // --fps resamples videos; a frame folder's rate is its own (folder_fps).
-    let resample = if p.source.is_dir() { None } else { opts.fps };
+    let resample = if p.source.is_dir() || p.lerobot.is_some() {
+        None
+    } else {
+        opts.fps
+    };
     // Decoding runs on its own thread, up to two chunks ahead of encoding and writing.
     let frames_decoded = std::thread::scope(|s| -> Result<u64> {
         let (tx, rx) = crossbeam_channel::bounded(2);
@@ -491,6 +532,7 @@ fn ingest_one(
     let (width, height) = st.size.unwrap_or((0, 0));
     let fps = opts
         .fps
+        .filter(|_| p.lerobot.is_none())
         .or(p.meta.folder_fps.filter(|_| p.source.is_dir()))
         .filter(|f| *f > 0.0)
         .unwrap_or_else(|| {
@@ -553,11 +595,52 @@ pub fn ingest(
     meta: CommitMeta,
     progress: &dyn Progress,
 ) -> Result<IngestReport> {
+    let sources: Vec<String> = inputs.iter().map(|s| source_name(&s.path)).collect();
+    ingest_planned(
+        ds,
+        &sources,
+        &|i| plan_one(&inputs[i], opts),
+        opts,
+        meta,
+        progress,
+    )
+}
+
+/// Ingests every episode of the LeRobot v3.0 dataset at `dir` (frames of `camera`, which
+/// may be left out when there is only one) as one new version, with the guarantees of
+/// [`ingest`]. Each episode's task text becomes its task id; `opts.defaults` give the
+/// domain, kind and task family.
+pub fn ingest_lerobot(
+    ds: &Dataset,
+    dir: &Path,
+    camera: Option<&str>,
+    opts: &IngestOptions,
+    meta: CommitMeta,
+    progress: &dyn Progress,
+) -> Result<IngestReport> {
+    let lr = Arc::new(LeRobotDataset::open(dir, camera)?);
+    let digests = crate::lerobot::file_digests(&lr)?;
+    let sources: Vec<String> = (0..lr.episodes.len())
+        .map(|i| format!("{}#episode={i}", lr.root.display()))
+        .collect();
+    let plan = |i: usize| crate::lerobot::plan_episode(&lr, i, &digests, opts);
+    ingest_planned(ds, &sources, &plan, opts, meta, progress)
+}
+
+/// Runs an ingest of `sources.len()` inputs, input `i` planned by `plan(i)`.
+fn ingest_planned(
+    ds: &Dataset,
+    sources: &[String],
+    plan: &(dyn Fn(usize) -> Result<Planned> + Sync),
+    opts: &IngestOptions,
+    meta: CommitMeta,
+    progress: &dyn Progress,
+) -> Result<IngestReport> {
     // A concurrent writer adding the same episode makes our commit conflict; the retry
     // then sees that episode as present and skips it.
     let mut attempt = 0;
     loop {
-        match ingest_attempt(ds, inputs, opts, meta.clone(), progress) {
+        match ingest_attempt(ds, sources, plan, opts, meta.clone(), progress) {
             Err(Error::Data(milv_data::Error::Conflict(_))) if attempt < 3 => attempt += 1,
             other => return other,
         }
@@ -566,7 +649,8 @@ pub fn ingest(
 
 fn ingest_attempt(
     ds: &Dataset,
-    inputs: &[InputSpec],
+    sources: &[String],
+    plan: &(dyn Fn(usize) -> Result<Planned> + Sync),
     opts: &IngestOptions,
     meta: CommitMeta,
     progress: &dyn Progress,
@@ -584,7 +668,7 @@ fn ingest_attempt(
         resumed: 0,
         warnings: Vec::new(),
     };
-    let todo = plan_batch(ds, base, inputs, opts, &mut report)?;
+    let todo = plan_batch(ds, base, sources, plan, opts, &mut report)?;
     // Reuse what an interrupted run of this same batch already finished.
     let pending: BTreeSet<String> = todo.iter().map(|p| p.episode_id.clone()).collect();
     let (journal, adopted) = Journal::open(ds.root(), &ds.table_root(TableKind::Frames), &pending)?;
@@ -610,7 +694,6 @@ fn ingest_attempt(
         });
         digests.extend(input_digests(p));
     }
-    report.resumed = resumed.len();
     report.resumed = resumed.len();
     let new_ids: Vec<String> = episodes.iter().map(|e| e.episode_id.clone()).collect();
     txn.add_files(TableKind::Frames, frame_files, new_ids);
@@ -641,7 +724,8 @@ fn ingest_attempt(
 fn plan_batch(
     ds: &Dataset,
     base: u64,
-    inputs: &[InputSpec],
+    sources: &[String],
+    plan: &(dyn Fn(usize) -> Result<Planned> + Sync),
     opts: &IngestOptions,
     report: &mut IngestReport,
 ) -> Result<Vec<Planned>> {
@@ -649,19 +733,16 @@ fn plan_batch(
         .into_iter()
         .map(|e| e.episode_id)
         .collect();
-    let selected: Vec<&InputSpec> = inputs
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| opts.partition.is_none_or(|p| p.contains_index(*i as u64)))
-        .map(|(_, s)| s)
+    let selected: Vec<usize> = (0..sources.len())
+        .filter(|i| opts.partition.is_none_or(|p| p.contains_index(*i as u64)))
         .collect();
-    let plans: Vec<Result<Planned>> = selected.par_iter().map(|s| plan_one(s, opts)).collect();
+    let plans: Vec<Result<Planned>> = selected.par_iter().map(|&i| plan(i)).collect();
     let mut todo = Vec::new();
     let mut in_batch: BTreeMap<String, PathBuf> = BTreeMap::new();
-    for (spec, plan) in selected.iter().zip(plans) {
+    for (&i, plan) in selected.iter().zip(plans) {
         match plan {
             Err(e) => report.failed.push(Failed {
-                source: source_name(&spec.path),
+                source: sources[i].clone(),
                 error: e.to_string(),
             }),
             Ok(p) if existing.contains(&p.episode_id) => report.skipped.push(Skipped {
@@ -840,6 +921,12 @@ fn commit_batch(
     opts: &IngestOptions,
     report: &mut IngestReport,
 ) -> Result<u64> {
+    // Episodes of one LeRobot dataset share files: each is listed once.
+    let mut seen = BTreeSet::new();
+    let digests: Vec<InputDigest> = digests
+        .into_iter()
+        .filter(|d| seen.insert(d.uri.clone()))
+        .collect();
     let m = txn.meta_mut();
     m.inputs = digests;
     m.summary = serde_json::json!({
@@ -866,17 +953,7 @@ fn commit_batch(
 }
 
 fn input_digests(p: &Planned) -> Vec<InputDigest> {
-    let mut out = vec![InputDigest {
-        uri: source_name(&p.source),
-        sha256: p.source_sha256.clone(),
-    }];
-    if let (Some(s), Some(sha)) = (&p.sidecar, &p.sidecar_sha256) {
-        out.push(InputDigest {
-            uri: source_name(&s.path),
-            sha256: sha.clone(),
-        });
-    }
-    out
+    p.inputs.clone()
 }
 
 #[cfg(test)]

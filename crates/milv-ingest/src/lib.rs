@@ -4,6 +4,7 @@
 //! |---|---|
 //! | [`ingest`] | [`ingest()`](ingest::ingest): plan, decode/encode in parallel, commit one version; [`IngestOptions`], [`IngestReport`] |
 //! | [`sidecar`] | per-episode action/state sidecars (JSON `milv-sidecar/1`, CSV) and [`EpisodeMeta`] |
+//! | `lerobot` | LeRobot v3.0 episodes as inputs ([`ingest_lerobot`]): file digests, one planned episode per LeRobot episode |
 //! | [`manifest`] | many inputs at once (JSON lines or CSV): [`InputSpec`] |
 //! | `journal` | the resume journal: shards an interrupted run finished are reused by the next |
 //! | [`error`] | [`Error`]: every message names the file it is about |
@@ -15,10 +16,11 @@
 pub mod error;
 pub mod ingest;
 mod journal;
+mod lerobot;
 pub mod manifest;
 pub mod sidecar;
 
 pub use error::{Error, Result};
-pub use ingest::{IngestOptions, IngestReport, NoProgress, Partition, Progress, ingest};
+pub use ingest::{IngestOptions, IngestReport, NoProgress, Partition, Progress, ingest, ingest_lerobot};
 pub use manifest::InputSpec;
 pub use sidecar::{EpisodeMeta, Sidecar};

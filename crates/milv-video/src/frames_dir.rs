@@ -150,6 +150,32 @@ fn image_err(path: &Path, e: impl std::fmt::Display) -> Error {
     }
 }
 
+/// An RGB image at the output size `resize` asks for (unchanged without one), as packed
+/// RGB24; `path` names the source in errors. Shared with readers of images stored
+/// elsewhere (LeRobot's inline image features).
+pub fn resize_rgb(
+    rgb: image::RgbImage,
+    resize: Option<&Resize>,
+    path: &Path,
+) -> Result<(u32, u32, Vec<u8>), Error> {
+    let (w, h) = rgb.dimensions();
+    let (out_w, out_h, plan) = plan_for(w, h, resize);
+    let data = if (plan.scale_w, plan.scale_h) == (w, h) && (out_w, out_h) == (w, h) {
+        rgb.into_raw()
+    } else {
+        let scaled;
+        let src = if (plan.scale_w, plan.scale_h) == (w, h) {
+            &rgb
+        } else {
+            scaled = imageops::resize(&rgb, plan.scale_w, plan.scale_h, FilterType::Triangle);
+            &scaled
+        };
+        compose(src.as_raw(), plan.scale_w as usize * 3, &plan, out_w, out_h)
+            .ok_or_else(|| image_err(path, "resized image is smaller than expected"))?
+    };
+    Ok((out_w, out_h, data))
+}
+
 /// The folder iterator before optional resampling.
 pub(crate) struct FrameDir {
     files: Vec<PathBuf>,
@@ -180,20 +206,7 @@ impl FrameDir {
                 got: (w, h),
             });
         }
-        let (out_w, out_h, plan) = plan_for(w, h, self.resize.as_ref());
-        let data = if (plan.scale_w, plan.scale_h) == (w, h) && (out_w, out_h) == (w, h) {
-            rgb.into_raw()
-        } else {
-            let scaled;
-            let src = if (plan.scale_w, plan.scale_h) == (w, h) {
-                &rgb
-            } else {
-                scaled = imageops::resize(&rgb, plan.scale_w, plan.scale_h, FilterType::Triangle);
-                &scaled
-            };
-            compose(src.as_raw(), plan.scale_w as usize * 3, &plan, out_w, out_h)
-                .ok_or_else(|| image_err(path, "resized image is smaller than expected"))?
-        };
+        let (out_w, out_h, data) = resize_rgb(rgb, self.resize.as_ref(), path)?;
         Ok(Frame {
             width: out_w,
             height: out_h,

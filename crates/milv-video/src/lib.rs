@@ -40,7 +40,7 @@ mod tests;
 
 pub use error::Error;
 pub use fit::{Plan, fit_plan};
-pub use frames_dir::{FrameDirReader, list_numbered_frames};
+pub use frames_dir::{FrameDirReader, list_numbered_frames, resize_rgb};
 pub use reader::VideoReader;
 pub use resample::Resample;
 pub use roundtrip::roundtrip;

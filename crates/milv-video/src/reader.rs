@@ -36,6 +36,21 @@ impl VideoReader {
     pub fn info(&self) -> &VideoInfo {
         &self.frames.inner().info
     }
+
+    /// Positions the decoder at the last keyframe at or before `ns` (stream time) and
+    /// switches to absolute timestamps: from here on `pts_ns` is the frame's own
+    /// presentation time in the stream (pts × time base), not relative to the first frame.
+    /// For reading one episode out of a file that holds many back to back (LeRobot v3):
+    /// frames before `ns` still come out, the caller skips them. Only before the first
+    /// frame and without resampling.
+    pub fn seek_to(&mut self, ns: i64) -> Result<(), Error> {
+        match &mut self.frames {
+            MaybeResample::Plain(d) => d.seek_to(ns),
+            MaybeResample::Resampled(_) => {
+                Err(Error::invalid("seek_to cannot be combined with fps resampling"))
+            }
+        }
+    }
 }
 
 impl Iterator for VideoReader {
@@ -202,6 +217,29 @@ impl Decoder {
             path: self.path.clone(),
             msg: msg.into(),
         }
+    }
+
+    fn seek_to(&mut self, ns: i64) -> Result<(), Error> {
+        if self.index > 0 {
+            return Err(Error::invalid("seek_to must come before the first frame"));
+        }
+        // Absolute stream time: tick 0 is 0 ns.
+        self.origin = Some((0, 0));
+        if ns <= 0 {
+            return Ok(());
+        }
+        if self.time_base.is_none() {
+            return Err(self.decode_err("cannot seek: the stream has no time base"));
+        }
+        // AV_TIME_BASE (µs) on the default stream, max_ts = us (ffmpeg-next passes the
+        // range end through as is); 1 ms early, so rounding can never land
+        // past the keyframe the target needs.
+        let us = (ns / 1000 - 1000).max(0);
+        self.input
+            .seek(us, ..us)
+            .map_err(|e| self.decode_err(format!("cannot seek to {:.6} s: {e}", ns as f64 / 1e9)))?;
+        self.decoder.flush();
+        Ok(())
     }
 
     /// End of stream: a read error if one cut the input short, NoFrames if nothing decoded.

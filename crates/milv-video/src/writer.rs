@@ -24,6 +24,10 @@ pub enum Codec {
     /// to stderr that cannot be silenced without `SVT_LOG` (setting env vars needs `unsafe`
     /// in edition 2024) and rejects frames smaller than 64×64.
     Av1,
+    /// LeRobot's AV1 settings: libsvtav1 preset 12, CRF 30 (yuv420p), falling back to
+    /// libaom-av1. SVT-AV1 needs frames of at least 64×64 and logs a banner unless the
+    /// process sets `SVT_LOG=1` before the first encoder opens.
+    SvtAv1,
     /// FFmpeg's mjpeg at qscale 2, yuvj420p (best in `.avi`).
     Mjpeg,
 }
@@ -53,6 +57,18 @@ impl Codec {
                     ],
                 ),
                 ("libsvtav1", &[("preset", "10"), ("crf", "25")]),
+            ],
+            Codec::SvtAv1 => &[
+                ("libsvtav1", &[("preset", "12"), ("crf", "30")]),
+                (
+                    "libaom-av1",
+                    &[
+                        ("usage", "realtime"),
+                        ("cpu-used", "8"),
+                        ("crf", "30"),
+                        ("b", "0"),
+                    ],
+                ),
             ],
             Codec::Mjpeg => &[("mjpeg", &[])],
         }
@@ -103,6 +119,20 @@ pub struct VideoWriter {
 impl VideoWriter {
     /// Creates `path` and writes the container header.
     pub fn create(path: &Path, width: u32, height: u32, fps: u32, codec: Codec) -> Result<Self, Error> {
+        Self::create_with_gop(path, width, height, fps, codec, None)
+    }
+
+    /// [`VideoWriter::create`] with a keyframe every `gop` frames (`None`: the encoder's
+    /// default). Short GOPs make random access cheap: a reader seeking to frame t decodes
+    /// from the keyframe before it (LeRobot writes `g=2`).
+    pub fn create_with_gop(
+        path: &Path,
+        width: u32,
+        height: u32,
+        fps: u32,
+        codec: Codec,
+        gop: Option<u32>,
+    ) -> Result<Self, Error> {
         crate::init()?;
         let enc_err = |msg: String| Error::Encode {
             path: path.to_path_buf(),
@@ -145,6 +175,9 @@ impl VideoWriter {
         enc.set_format(pixel_format);
         enc.set_time_base(encoder_tb);
         enc.set_frame_rate(Some(Rational::new(fps_i32, 1)));
+        if let Some(g) = gop {
+            enc.set_gop(g.max(1));
+        }
         let mut flags = codec::Flags::empty();
         if global_header {
             // MP4/MKV want codec headers in extradata rather than in-band.
@@ -192,6 +225,14 @@ impl VideoWriter {
             rgb: frame::Video::new(Pixel::RGB24, width, height),
             next_pts: 0,
         })
+    }
+
+    /// FFmpeg's name of the encoder in use (e.g. `libaom-av1`).
+    pub fn encoder_name(&self) -> String {
+        self.encoder
+            .codec()
+            .map(|c| c.name().to_string())
+            .unwrap_or_default()
     }
 
     fn enc_err(&self, msg: impl Into<String>) -> Error {

@@ -1,5 +1,6 @@
 //! `milv-export`: MCAP and Rerun recordings of a dataset version, to look at what the
-//! translation did before trusting it for training.
+//! translation did before trusting it for training; LeRobot v3.0 datasets for the policies
+//! people already train.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -16,14 +17,14 @@ use milv_rerun::Sink;
 #[command(
     name = "milv-export",
     version,
-    about = "MCAP and Rerun recordings of a dataset version: human, imagined and robot frames, latents, actions, quality",
+    about = "MCAP and Rerun recordings of a dataset version (human, imagined and robot frames, latents, actions, quality), and LeRobot v3.0 datasets",
     long_about = "Exports a pinned dataset version for visual inspection: each human frame, its \
 translation by one model (imagined frame, latent ẑ^r, predicted action â^r), its quality \
 (Brenner, SSIM, β, curated weight) and the robot frame it was aligned to, with that frame's \
 true action. Robot episodes named with --episodes are exported with their own frames and \
 actions.\n\nExamples:\n  milv-export mcap ds@7 -o translations.mcap\n  milv-export mcap ds --per-episode -o mcap/\n  \
 milv-export rerun ds --sort beta -o translations.rrd\n  milv-export rerun ds --spawn\n  \
-milv-export schemas schemas/mcap"
+milv-export lerobot ds@7 -o lerobot/ds\n  milv-export schemas schemas/mcap"
 )]
 struct Cli {
     #[command(subcommand)]
@@ -104,11 +105,63 @@ enum Cmd {
         #[arg(long)]
         connect: Option<String>,
     },
+    /// Writes a LeRobot v3.0 dataset that `LeRobotDataset(repo_id, root=OUT)` loads offline:
+    /// `observation.image` (AV1 video, every frame decoded back and its timestamp checked
+    /// within LeRobot's 1e-4 s before the export is finalised; or lossless inline images
+    /// with --images), `action`, `observation.state`, the task text (the MILV task id),
+    /// meta/stats.json and tasks.parquet. Imagined and curated exports add `milv.model_id`
+    /// and `milv.weight` features. Built in a temporary folder and renamed to OUT at the end.
+    #[command(
+        after_help = "Examples:\n  milv-export lerobot data/robot@3 -o ~/lerobot/robot\n  milv-export lerobot data/human --table imagined --images -o out/imagined"
+    )]
+    Lerobot {
+        /// DATASET or DATASET@VERSION (default: the latest version).
+        dataset: DatasetRef,
+        /// Output folder (must not exist, or be empty).
+        #[arg(short, long)]
+        out: PathBuf,
+        /// Which rows: frames (recorded), imagined (one model's translations with their
+        /// inverse-dynamics actions) or curated (the curated view with its loss weights).
+        #[arg(long, default_value = "frames", value_parser = ["frames", "imagined", "curated"])]
+        table: String,
+        /// AV1 video, concatenated per file as LeRobot writes it (the default).
+        #[arg(long, conflicts_with = "images")]
+        video: bool,
+        /// Inline images instead of video (stored PNG/JPEG bytes, copied losslessly).
+        #[arg(long)]
+        images: bool,
+        /// Keyframe interval of the video. 2 is LeRobot's: random access (training) decodes
+        /// at most one extra frame. Longer encodes several times faster and smaller, but
+        /// LeRobot then decodes up to N-1 extra frames per item.
+        #[arg(long, default_value_t = milv_lerobot::write::DEFAULT_GOP, value_parser = clap::value_parser!(u32).range(1..))]
+        gop: u32,
+        /// Translation model for --table imagined (default: the only one).
+        #[arg(long)]
+        model_id: Option<String>,
+        /// Print a JSON summary on stdout.
+        #[arg(long)]
+        json: bool,
+    },
     /// Writes the documented schema files of the MCAP channels into a folder.
     Schemas {
         /// Folder (e.g. schemas/mcap).
         dir: PathBuf,
     },
+}
+
+/// The export's progress: a bar over episodes.
+struct ExportBar(indicatif::ProgressBar);
+
+impl milv_lerobot::write::Progress for ExportBar {
+    fn planned(&self, episodes: usize, _frames: u64) {
+        self.0.set_length(episodes as u64);
+    }
+    fn episode_done(&self, _frames: u64) {
+        self.0.inc(1);
+    }
+    fn verifying(&self) {
+        self.0.set_message("checking video timestamps");
+    }
 }
 
 fn plan(s: &Select) -> anyhow::Result<(Dataset, ViewPlan)> {
@@ -216,6 +269,51 @@ fn run(cli: Cli) -> anyhow::Result<u8> {
                 println!("{}: {} episode(s), {} frames", to, logged.episodes, logged.frames);
             }
         }
+        Cmd::Lerobot {
+            dataset,
+            out,
+            table,
+            video: _,
+            images,
+            gop,
+            model_id,
+            json,
+        } => {
+            let ds = Dataset::open(&dataset.root).with_context(|| format!("opening {dataset}"))?;
+            let v = ds.resolve(dataset.version)?;
+            let opts = milv_lerobot::ExportOptions {
+                source: table.parse().map_err(anyhow::Error::msg)?,
+                video: !images,
+                gop,
+                model_id,
+            };
+            let bars = ExportBar(cli::bar(0, "episodes"));
+            let report = milv_lerobot::export(&ds, v, &out, &opts, &bars)
+                .with_context(|| format!("exporting {}@{v} to {}", ds.root().display(), out.display()))?;
+            bars.0.finish_and_clear();
+            if json {
+                cli::print_json(&report)?;
+            } else {
+                println!(
+                    "{}: {} episodes, {} frames at {} fps, {}x{}, {}{}",
+                    report.out,
+                    report.episodes,
+                    report.frames,
+                    report.fps,
+                    report.width,
+                    report.height,
+                    if report.video {
+                        "AV1 video"
+                    } else {
+                        "inline images"
+                    },
+                    report
+                        .max_timestamp_error_s
+                        .map(|e| format!(" (timestamps checked, worst error {e:.1e} s)"))
+                        .unwrap_or_default()
+                );
+            }
+        }
         Cmd::Schemas { dir } => {
             for (rel, text) in milv_mcap::schema::schema_files() {
                 let p = dir.join(rel);
@@ -232,5 +330,18 @@ fn run(cli: Cli) -> anyhow::Result<u8> {
 }
 
 fn main() -> ExitCode {
+    quiet_svt_av1();
     cli::finish("milv-export", run(Cli::parse()))
+}
+
+/// SVT-AV1 (the LeRobot export's encoder) prints a 16-line banner per video file unless
+/// `SVT_LOG` asks for errors only; it reads the variable itself, so set it before any
+/// encoder exists.
+#[allow(unsafe_code)]
+fn quiet_svt_av1() {
+    if std::env::var_os("SVT_LOG").is_none() {
+        // SAFETY: first thing in main, before any thread is started, so nothing else can
+        // be reading or writing the environment.
+        unsafe { std::env::set_var("SVT_LOG", "1") };
+    }
 }
