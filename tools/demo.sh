@@ -90,6 +90,22 @@ print(eps.group_by("domain", "kind").agg(pl.len().alias("episodes"), pl.col("n_f
 sys.stdout.flush()
 os._exit(0)  # the deltalake reader can abort at interpreter exit (upstream issue)
 PY
+echo "== object storage: the samples as a dataset on S3 (a throwaway SeaweedFS on 127.0.0.1),"
+echo "   ingested from S3, scored by 2 Ray partitions, verified, read back with ray.data.read_delta"
+.venv/bin/python tools/s3/seaweedfs.py -- bash -c '
+  set -euo pipefail
+  BIN=$1 OUT=$2
+  .venv/bin/python - samples <<PY
+import os, pyarrow.fs as fs
+s3 = fs.S3FileSystem(access_key=os.environ["AWS_ACCESS_KEY_ID"], secret_key=os.environ["AWS_SECRET_ACCESS_KEY"],
+                     region="us-east-1", endpoint_override=os.environ["AWS_ENDPOINT_URL"].split("://")[1], scheme="http")
+fs.copy_files("samples", "milv/inputs", destination_filesystem=s3)
+PY
+  MILV_INPUT_CACHE="$OUT/s3-input-cache" "$BIN/milv-ingest" s3://milv/demo --manifest s3://milv/inputs/manifest.jsonl
+  .venv/bin/python tools/ray/milv_ray.py score s3://milv/demo --partitions 2 --bin "$BIN"
+  "$BIN/milv-ds" verify s3://milv/demo
+  "$BIN/milv-ds" log s3://milv/demo
+' _ "$BIN" "$OUT"
 
 cat <<TXT
 
@@ -103,5 +119,6 @@ Outputs:
   LeRobot           $OUT/lerobot-imagined (LeRobotDataset("local/x", root=...)), re-imported as $OUT/from-lerobot
   read it elsewhere .venv/bin/python -c "import polars as pl; print(pl.read_delta('$DS/frames').head())"
   inspect           target/debug/milv-ds info|log|verify $DS[@VERSION]
+  on S3             any DATASET may be s3://bucket/prefix (README: Object storage and Ray); the demo's S3 server is gone
   the two domains   samples/contact_sheet.png (rows: human / robot, same motion)
 TXT

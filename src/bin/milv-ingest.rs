@@ -34,9 +34,10 @@ enum Encoding {
     after_help = "Examples:\n  milv-ingest data/ds clips/*.mp4 --domain human --task draw/circle\n  milv-ingest data/ds --from-lerobot ~/lerobot/pusht --camera observation.image\n  milv-ingest data/ds --manifest samples/manifest.jsonl --json\n  milv-ingest data/ds frames_dir/ --fps 10 --domain robot --kind random"
 )]
 struct Args {
-    /// Dataset folder (created if missing).
+    /// Dataset folder or s3://bucket/prefix (created if missing).
     dataset: PathBuf,
-    /// Video files or folders of numbered PNG/JPEG frames.
+    /// Video files or folders of numbered PNG/JPEG frames (local, or s3:// URLs: fetched
+    /// with their sidecars into $MILV_INPUT_CACHE first).
     inputs: Vec<PathBuf>,
     /// Import every episode of a local LeRobot v3.0 dataset (frames decoded from its
     /// videos at `from_timestamp + timestamp`, or from its inline images; `action` and
@@ -127,10 +128,38 @@ impl Progress for Bars {
     }
 }
 
-fn run(args: Args) -> anyhow::Result<u8> {
+/// The local copy of an `s3://` input (with its sidecars); a failed download leaves the
+/// input as given, so ingest reports it among the failed inputs and the others land.
+fn fetched(p: &std::path::Path, siblings: bool) -> PathBuf {
+    match milv::data::store::fetch_input(p, siblings) {
+        Ok(local) => local,
+        Err(e) => {
+            eprintln!("warning: {e}");
+            p.to_path_buf()
+        }
+    }
+}
+
+fn run(mut args: Args) -> anyhow::Result<u8> {
     let mut inputs: Vec<InputSpec> = args.inputs.iter().map(InputSpec::new).collect();
     for m in &args.manifest {
-        inputs.extend(milv::ingest::manifest::read(m)?);
+        let local =
+            milv::data::store::fetch_input(m, false).with_context(|| format!("manifest {}", m.display()))?;
+        inputs.extend(milv::ingest::manifest::read(&local)?);
+    }
+    // Only this worker's share is fetched (ingest partitions inputs by their index).
+    for (i, spec) in inputs.iter_mut().enumerate() {
+        if args.partition.is_some_and(|p| !p.contains_index(i as u64)) {
+            continue;
+        }
+        spec.path = fetched(&spec.path, spec.sidecar.is_none());
+        spec.sidecar = spec.sidecar.as_deref().map(|s| fetched(s, false));
+    }
+    if let Some(dir) = &args.from_lerobot {
+        args.from_lerobot = Some(
+            milv::data::store::fetch_input(dir, false)
+                .with_context(|| format!("LeRobot dataset {}", dir.display()))?,
+        );
     }
     if inputs.is_empty() && args.from_lerobot.is_none() {
         bail!("no inputs: give video files / frame folders, --manifest or --from-lerobot");
@@ -139,7 +168,7 @@ fn run(args: Args) -> anyhow::Result<u8> {
         if inputs.len() != 1 {
             bail!("--sidecar needs exactly one input, got {}", inputs.len());
         }
-        inputs[0].sidecar = Some(s.clone());
+        inputs[0].sidecar = Some(fetched(s, false));
     }
     let encoding = match args.frame_encoding {
         Encoding::Png => FrameEncoding::Png,

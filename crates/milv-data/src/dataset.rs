@@ -1,21 +1,19 @@
 //! [`Dataset`]: a folder of versioned tables, opened at `PATH` or `PATH@N`.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 use deltalake::arrow::array::RecordBatch;
-use deltalake::parquet::arrow::ProjectionMask;
-use deltalake::parquet::arrow::arrow_reader::{ParquetRecordBatchReader, ParquetRecordBatchReaderBuilder};
 
 use crate::delta;
 use crate::error::{Error, Result};
 use crate::log::{self, CommitMeta, FileAdd, TableChange, VersionEntry};
 use crate::schema::TableKind;
 use crate::shard::{ShardOptions, ShardWriter};
+use crate::store::{self, Root};
 
-/// `PATH` or `PATH@VERSION`, as given on a command line.
+/// `PATH` or `PATH@VERSION`, as given on a command line; `PATH` may be `s3://bucket/prefix`.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct DatasetRef {
     pub root: PathBuf,
@@ -63,16 +61,21 @@ impl std::fmt::Display for DatasetRef {
 #[derive(Clone, Debug, PartialEq)]
 pub struct TableFile {
     pub table: TableKind,
+    /// Where the file is: its path, or its `s3://` URL (for messages; read it with
+    /// [`Dataset::read_file`]).
     pub abs_path: PathBuf,
     pub info: FileAdd,
     /// Dataset version that added the file.
     pub added_in: u64,
 }
 
-/// A versioned dataset. Cheap to open; every read names a version.
+/// A versioned dataset in a folder or at `s3://bucket/prefix`. Cheap to open; every read
+/// names a version.
 pub struct Dataset {
-    root: PathBuf,
-    rt: tokio::runtime::Runtime,
+    root: Root,
+    /// Log entries read so far: an entry never changes once created, and on an object
+    /// store every read is a request.
+    entries: std::sync::Mutex<BTreeMap<u64, VersionEntry>>,
 }
 
 impl std::fmt::Debug for Dataset {
@@ -81,27 +84,28 @@ impl std::fmt::Debug for Dataset {
     }
 }
 
-fn runtime() -> Result<tokio::runtime::Runtime> {
-    tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .map_err(Error::io("start async runtime", "."))
-}
-
 impl Dataset {
-    /// Opens an existing dataset.
+    /// Opens an existing dataset (a folder, or `s3://bucket/prefix`).
     pub fn open(root: impl AsRef<Path>) -> Result<Self> {
-        let root = root.as_ref().to_path_buf();
+        let root = Root::parse(root.as_ref())?;
         log::list_versions(&root)?;
-        Ok(Dataset { root, rt: runtime()? })
+        Ok(Dataset {
+            root,
+            entries: Default::default(),
+        })
     }
 
-    /// Opens a dataset, creating an empty one (version 0) if the folder has none.
+    /// Opens a dataset, creating an empty one (version 0) if the location has none.
     pub fn open_or_create(root: impl AsRef<Path>, meta: CommitMeta) -> Result<Self> {
-        let root = root.as_ref().to_path_buf();
-        let dir = log::log_dir(&root);
-        std::fs::create_dir_all(&dir).map_err(Error::io("create dataset", &dir))?;
-        if log::list_versions(&root)?.is_empty() {
+        let root = Root::parse(root.as_ref())?;
+        root.ensure_dir(log::LOG_DIR)?;
+        let empty = match log::list_versions(&root) {
+            Ok(v) => v.is_empty(),
+            // An object store has no empty folders: no entry yet means no dataset yet.
+            Err(Error::NotADataset(_)) if !root.is_local() => true,
+            Err(e) => return Err(e),
+        };
+        if empty {
             let entry = VersionEntry {
                 format: log::ENTRY_FORMAT.into(),
                 version: 0,
@@ -116,10 +120,33 @@ impl Dataset {
             // Losing this race just means someone else created it.
             log::try_create_entry(&root, &entry)?;
         }
-        Ok(Dataset { root, rt: runtime()? })
+        Ok(Dataset {
+            root,
+            entries: Default::default(),
+        })
     }
 
+    /// The folder, or `s3://bucket/prefix` (as a path, for messages).
     pub fn root(&self) -> &Path {
+        self.root.label()
+    }
+
+    /// True for a local folder, false for an object store.
+    pub fn is_local(&self) -> bool {
+        self.root.is_local()
+    }
+
+    /// A local folder for files not yet part of the dataset (resume journals).
+    pub fn staging_dir(&self) -> PathBuf {
+        self.root.staging()
+    }
+
+    /// The size of data file `path` (relative to `table`'s root), `None` if absent.
+    pub fn file_size(&self, table: TableKind, path: &str) -> Result<Option<u64>> {
+        self.root.size(&format!("{}/{path}", table.name()))
+    }
+
+    pub(crate) fn location(&self) -> &Root {
         &self.root
     }
 
@@ -133,7 +160,7 @@ impl Dataset {
         self.versions()?
             .last()
             .copied()
-            .ok_or_else(|| Error::NotADataset(self.root.clone()))
+            .ok_or_else(|| Error::NotADataset(self.root().to_path_buf()))
     }
 
     /// `None` -> latest; `Some(v)` -> `v` if it exists.
@@ -145,13 +172,27 @@ impl Dataset {
             Some(v) => Err(Error::NoSuchVersion {
                 version: v,
                 latest,
-                path: self.root.clone(),
+                path: self.root().to_path_buf(),
             }),
         }
     }
 
     pub fn entry(&self, version: u64) -> Result<VersionEntry> {
-        log::read_entry(&self.root, version)
+        let cached = self
+            .entries
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .get(&version)
+            .cloned();
+        if let Some(e) = cached {
+            return Ok(e);
+        }
+        let e = log::read_entry(&self.root, version)?;
+        self.entries
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .insert(version, e.clone());
+        Ok(e)
     }
 
     /// Every entry up to and including `version`.
@@ -163,8 +204,9 @@ impl Dataset {
             .collect()
     }
 
+    /// The table's folder or URL (for messages).
     pub fn table_root(&self, table: TableKind) -> PathBuf {
-        self.root.join(table.name())
+        self.root.label_of(table.name())
     }
 
     /// The files making up `table` at dataset `version`, in the order they were added.
@@ -195,19 +237,31 @@ impl Dataset {
     ) -> Result<impl Iterator<Item = Result<RecordBatch>> + use<>> {
         let files = self.files(table, version)?;
         let columns: Option<Vec<String>> = columns.map(|c| c.iter().map(|s| s.to_string()).collect());
-        Ok(files.into_iter().flat_map(move |f| {
-            let reader = open_parquet(&f.abs_path, columns.as_deref());
-            let (reader, path) = match reader {
-                Ok(r) => (r, f.abs_path),
-                Err(e) => return Box::new(std::iter::once(Err(e))) as Box<dyn Iterator<Item = _>>,
-            };
-            Box::new(reader.map(move |b| {
-                b.map_err(|e| Error::Parquet {
-                    source: e.into(),
-                    path: path.clone(),
-                })
-            }))
-        }))
+        let root = self.root.clone();
+        Ok(files.into_iter().flat_map(
+            move |f| match root.open_parquet(&file_key(&f), columns.as_deref()) {
+                Ok(r) => r,
+                Err(e) => Box::new(std::iter::once(Err(e))),
+            },
+        ))
+    }
+
+    /// Streams the rows of one data file of this dataset, optionally only some columns.
+    pub fn read_file(
+        &self,
+        file: &TableFile,
+        columns: Option<&[&str]>,
+    ) -> Result<impl Iterator<Item = Result<RecordBatch>> + use<>> {
+        let cols: Option<Vec<String>> = columns.map(|c| c.iter().map(|s| s.to_string()).collect());
+        self.root.open_parquet(&file_key(file), cols.as_deref())
+    }
+
+    /// The Parquet footer of one data file.
+    pub fn file_footer(
+        &self,
+        file: &TableFile,
+    ) -> Result<std::sync::Arc<deltalake::parquet::file::metadata::ParquetMetaData>> {
+        self.root.parquet_metadata(&file_key(file))
     }
 
     /// Reads a whole (small) table into memory.
@@ -217,7 +271,7 @@ impl Dataset {
 
     /// The Delta version each table had at each dataset version (from the tables' history).
     pub fn delta_versions(&self) -> Result<BTreeMap<TableKind, BTreeMap<u64, u64>>> {
-        self.rt.block_on(async {
+        store::block_on(async {
             let mut out = BTreeMap::new();
             for t in TableKind::ALL {
                 out.insert(t, delta::version_map(&self.root, t).await?);
@@ -237,18 +291,17 @@ impl Dataset {
 
     /// Relative file paths Delta itself lists for a table at a Delta version.
     pub fn delta_files(&self, table: TableKind, delta_version: u64) -> Result<Vec<String>> {
-        self.rt
-            .block_on(delta::files_at(&self.root, table, delta_version))
+        store::block_on(delta::files_at(&self.root, table, delta_version))
     }
 
     /// Versions whose entries some table has not received yet (a writer stopped between
     /// creating the entry and committing it to the tables).
     pub fn pending(&self) -> Result<Vec<(u64, TableKind)>> {
-        self.rt.block_on(async {
+        store::block_on(async {
             let mut out = Vec::new();
             let versions = self.versions()?;
             for t in TableKind::ALL {
-                let applied = if delta::has_delta_log(&self.root, t) {
+                let applied = if delta::has_delta_log(&self.root, t)? {
                     let table = delta::open_or_create(&self.root, t).await?;
                     delta::applied_version(&self.root, &table, t).await?
                 } else {
@@ -271,7 +324,7 @@ impl Dataset {
     /// Commits every logged version to the Delta tables that lack it. Idempotent.
     pub fn roll_forward(&self) -> Result<usize> {
         let pending = self.pending()?;
-        self.rt.block_on(async {
+        store::block_on(async {
             for (v, t) in &pending {
                 let entry = self.entry(*v)?;
                 delta::apply(&self.root, *t, &entry).await?;
@@ -282,10 +335,10 @@ impl Dataset {
 
     /// Runs Delta's vacuum (full mode) on every table; returns the deleted paths.
     pub fn vacuum_tables(&self, retain_hours: u64, dry_run: bool) -> Result<Vec<String>> {
-        self.rt.block_on(async {
+        store::block_on(async {
             let mut deleted = Vec::new();
             for t in TableKind::ALL {
-                if !delta::has_delta_log(&self.root, t) {
+                if !delta::has_delta_log(&self.root, t)? {
                     continue;
                 }
                 let table = delta::open_or_create(&self.root, t).await?;
@@ -307,43 +360,9 @@ impl Dataset {
     }
 }
 
-/// Streams the rows of one data file (e.g. a [`TableFile`]'s `abs_path`).
-pub fn read_file(
-    path: &Path,
-    columns: Option<&[&str]>,
-) -> Result<impl Iterator<Item = Result<RecordBatch>> + use<>> {
-    let cols: Option<Vec<String>> = columns.map(|c| c.iter().map(|s| s.to_string()).collect());
-    let reader = open_parquet(path, cols.as_deref())?;
-    let path = path.to_path_buf();
-    Ok(reader.map(move |b| {
-        b.map_err(|e| Error::Parquet {
-            source: e.into(),
-            path: path.clone(),
-        })
-    }))
-}
-
-pub(crate) fn open_parquet(path: &Path, columns: Option<&[String]>) -> Result<ParquetRecordBatchReader> {
-    let file = File::open(path).map_err(|e| match e.kind() {
-        std::io::ErrorKind::NotFound => Error::Invalid(format!(
-            "data file missing (removed by `milv-ds vacuum`? versions older than its retention \
-             are no longer readable): {}",
-            path.display()
-        )),
-        _ => Error::io("open shard", path)(e),
-    })?;
-    let builder = ParquetRecordBatchReaderBuilder::try_new(file).map_err(Error::parquet(path))?;
-    let builder = match columns {
-        Some(cols) => {
-            let mask = ProjectionMask::columns(builder.parquet_schema(), cols.iter().map(String::as_str));
-            builder.with_projection(mask)
-        }
-        None => builder,
-    };
-    builder
-        .with_batch_size(1024)
-        .build()
-        .map_err(Error::parquet(path))
+/// A data file's key relative to the dataset root.
+fn file_key(f: &TableFile) -> String {
+    format!("{}/{}", f.table.name(), f.info.path)
 }
 
 fn now_ms() -> i64 {
@@ -379,7 +398,7 @@ impl Transaction<'_> {
 
     /// A writer for new files of `table` (they stay invisible until the commit).
     pub fn shard_writer(&self, table: TableKind, opts: ShardOptions) -> Result<ShardWriter> {
-        ShardWriter::new(&self.ds.table_root(table), table, opts)
+        ShardWriter::for_dataset(self.ds.location(), table, opts)
     }
 
     pub fn add_files(&mut self, table: TableKind, files: Vec<FileAdd>, episodes: Vec<String>) {
@@ -411,32 +430,29 @@ impl Transaction<'_> {
         for (t, c) in &self.changes {
             for f in &c.add {
                 if !self.adopted.contains(&(*t, f.path.clone())) {
-                    let _ = std::fs::remove_file(self.ds.table_root(*t).join(&f.path));
+                    self.ds.root.remove(&format!("{}/{}", t.name(), f.path));
                 }
             }
         }
     }
 
-    /// Every added file must be on disk, complete, with its folder entry synced, before
+    /// Every added file must be stored, complete, with its folder entry synced, before
     /// a version may name it (e.g. a concurrent vacuum may have removed an orphan).
     fn check_files_durable(&self) -> Result<()> {
         for (t, c) in &self.changes {
-            let root = self.ds.table_root(*t);
             for f in &c.add {
-                let path = root.join(&f.path);
-                let size = std::fs::metadata(&path)
-                    .map_err(Error::io("check new file", &path))?
-                    .len();
-                if size != f.size {
+                let size = self.ds.file_size(*t, &f.path)?;
+                if size != Some(f.size) {
+                    let what = size.map_or("missing".to_string(), |s| format!("{s} bytes"));
                     return Err(Error::Invalid(format!(
-                        "file is {size} bytes, expected {}: {}",
+                        "new data file is {what}, expected {} bytes: {}",
                         f.size,
-                        path.display()
+                        self.ds.table_root(*t).join(&f.path).display()
                     )));
                 }
             }
-            if !c.add.is_empty() {
-                log::sync_dir(&root)?;
+            if let (false, Root::Local(root)) = (c.add.is_empty(), &self.ds.root) {
+                store::sync_dir(&root.join(t.name()))?;
             }
         }
         Ok(())

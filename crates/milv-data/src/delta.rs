@@ -6,7 +6,6 @@
 //! again, so two processes rolling the same entry forward never apply it twice.
 
 use std::collections::{BTreeMap, HashMap};
-use std::path::Path;
 
 use deltalake::kernel::engine::arrow_conversion::TryIntoKernel as _;
 use deltalake::kernel::transaction::{CommitBuilder, CommitProperties, TransactionError};
@@ -19,34 +18,31 @@ use serde_json::{Value, json};
 use crate::error::{Error, Result};
 use crate::log::{FileAdd, VersionEntry};
 use crate::schema::TableKind;
+use crate::store::Root;
 
 /// Application id of MILV's Delta transactions.
 pub const APP_ID: &str = "milv";
 
-pub(crate) fn table_url(root: &Path, table: TableKind) -> Result<url::Url> {
-    let dir = root.join(table.name());
-    std::fs::create_dir_all(&dir).map_err(Error::io("create table folder", &dir))?;
-    let abs = std::fs::canonicalize(&dir).map_err(Error::io("resolve", &dir))?;
-    url::Url::from_directory_path(&abs)
-        .map_err(|()| Error::Invalid(format!("cannot make a URL of {}", abs.display())))
+pub(crate) fn table_url(root: &Root, table: TableKind) -> Result<url::Url> {
+    root.table_url(table.name())
 }
 
 /// A table exists once its first commit does (a crash mid-creation leaves a bare folder).
-pub(crate) fn has_delta_log(root: &Path, table: TableKind) -> bool {
-    root.join(table.name())
-        .join("_delta_log/00000000000000000000.json")
-        .is_file()
+pub(crate) fn has_delta_log(root: &Root, table: TableKind) -> Result<bool> {
+    Ok(root
+        .size(&format!("{}/_delta_log/00000000000000000000.json", table.name()))?
+        .is_some())
 }
 
-/// How errors name a table: its folder.
-fn label(root: &Path, table: TableKind) -> String {
-    root.join(table.name()).display().to_string()
+/// How errors name a table: its folder or URL.
+fn label(root: &Root, table: TableKind) -> String {
+    root.label_of(table.name()).display().to_string()
 }
 
 /// Opens a table at its latest version, creating it (empty, Delta version 0) if needed.
-pub(crate) async fn open_or_create(root: &Path, table: TableKind) -> Result<DeltaTable> {
+pub(crate) async fn open_or_create(root: &Root, table: TableKind) -> Result<DeltaTable> {
     let url = table_url(root, table)?;
-    if !has_delta_log(root, table) {
+    if !has_delta_log(root, table)? {
         let schema: StructType =
             table
                 .arrow_schema()
@@ -67,19 +63,19 @@ pub(crate) async fn open_or_create(root: &Path, table: TableKind) -> Result<Delt
             Ok(t) => return Ok(t),
             // Lost a creation race to another process: fine, open theirs.
             Err(DeltaTableError::VersionAlreadyExists(_)) => {}
-            Err(_) if has_delta_log(root, table) => {}
+            Err(_) if has_delta_log(root, table).unwrap_or(false) => {}
             Err(e) => return Err(Error::delta(&label(root, table))(e)),
         }
     }
     DeltaTableBuilder::from_url(url)
-        .map_err(Error::delta(table.name()))?
+        .map_err(Error::delta(&label(root, table)))?
         .load()
         .await
-        .map_err(Error::delta(table.name()))
+        .map_err(Error::delta(&label(root, table)))
 }
 
 /// The table's `milv` application transaction version: the last dataset version applied.
-pub(crate) async fn applied_version(root: &Path, table: &DeltaTable, kind: TableKind) -> Result<Option<u64>> {
+pub(crate) async fn applied_version(root: &Root, table: &DeltaTable, kind: TableKind) -> Result<Option<u64>> {
     let v = table
         .snapshot()
         .map_err(Error::delta(&label(root, kind)))?
@@ -127,7 +123,7 @@ fn remove_action(path: &str, now_ms: i64, data_change: bool) -> Action {
 }
 
 /// Applies one entry to one table unless the table already has it.
-pub(crate) async fn apply(root: &Path, kind: TableKind, entry: &VersionEntry) -> Result<()> {
+pub(crate) async fn apply(root: &Root, kind: TableKind, entry: &VersionEntry) -> Result<()> {
     let Some(change) = entry.tables.get(kind.name()) else {
         return Ok(());
     };
@@ -209,8 +205,8 @@ fn chrono_now_ms() -> i64 {
 }
 
 /// Dataset version -> Delta version of the commit that applied it, from the table history.
-pub(crate) async fn version_map(root: &Path, kind: TableKind) -> Result<BTreeMap<u64, u64>> {
-    if !has_delta_log(root, kind) {
+pub(crate) async fn version_map(root: &Root, kind: TableKind) -> Result<BTreeMap<u64, u64>> {
+    if !has_delta_log(root, kind)? {
         return Ok(BTreeMap::new());
     }
     let table = open_or_create(root, kind).await?;
@@ -231,7 +227,7 @@ pub(crate) async fn version_map(root: &Path, kind: TableKind) -> Result<BTreeMap
 }
 
 /// Relative paths of the files of a table at a Delta version.
-pub(crate) async fn files_at(root: &Path, kind: TableKind, delta_version: u64) -> Result<Vec<String>> {
+pub(crate) async fn files_at(root: &Root, kind: TableKind, delta_version: u64) -> Result<Vec<String>> {
     let url = table_url(root, kind)?;
     let table = DeltaTableBuilder::from_url(url)
         .map_err(Error::delta(&label(root, kind)))?
@@ -247,7 +243,7 @@ pub(crate) async fn files_at(root: &Path, kind: TableKind, delta_version: u64) -
 
 /// Delta's vacuum in full mode (also removes files no commit ever referenced).
 pub(crate) async fn vacuum(
-    root: &Path,
+    root: &Root,
     table: DeltaTable,
     kind: TableKind,
     retain_hours: u64,

@@ -54,6 +54,15 @@ pub enum Error {
     Arrow(#[from] deltalake::arrow::error::ArrowError),
     #[error("schema mismatch in {table}: {msg}")]
     Schema { table: String, msg: String },
+    #[error("{op}: {source}: {uri}")]
+    Store {
+        op: &'static str,
+        #[source]
+        source: Box<deltalake::logstore::object_store::Error>,
+        uri: String,
+    },
+    #[error("unsupported dataset location {uri}: {msg}")]
+    Location { uri: String, msg: String },
     #[error("{0}")]
     Invalid(String),
 }

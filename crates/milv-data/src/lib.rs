@@ -1,6 +1,6 @@
 //! # milv-data — the MILV dataset store
 //!
-//! A dataset is a folder holding one [Delta Lake](https://delta.io) table per kind of row
+//! A dataset is a folder (or an `s3://bucket/prefix` on any S3-compatible store) holding one [Delta Lake](https://delta.io) table per kind of row
 //! (`episodes`, `frames`, …; see [`schema`]) plus a dataset-level version log in
 //! `_milv/versions/`. Spark, Polars, DuckDB or pyarrow read the tables directly; MILV
 //! tools read them at a pinned dataset version.
@@ -17,11 +17,13 @@
 //! | [`log`] | the version log: [`VersionEntry`], [`CommitMeta`] (command line, tool version, input digests) |
 //! | [`ops`] | maintenance: info, verify, delete episodes, compact, vacuum |
 //! | [`partition`] | [`Partition`]: `--partition i/n` shares for stateless parallel workers |
+//! | [`store`] | where the bytes live: a folder or `s3://bucket/prefix` (commit point, uploads, ranged reads) |
 //!
 //! ## How a change becomes a version
 //! 1. A [`Transaction`] is planned against the latest version; its new Parquet files are
 //!    written (invisible: no table references them yet).
-//! 2. `commit()` atomically creates `_milv/versions/<N>.json`, naming the files each table
+//! 2. `commit()` atomically creates `_milv/versions/<N>.json` (hard link in a folder,
+//!    `If-None-Match: *` put on S3), naming the files each table
 //!    gains or loses. This is the commit point: the version exists from here on.
 //! 3. Each touched Delta table gets one commit carrying application transaction
 //!    `(milv, N)`; a writer that died before this step is completed by the next writer
@@ -52,6 +54,7 @@ pub mod read;
 pub mod rows;
 pub mod schema;
 pub mod shard;
+pub mod store;
 pub mod view;
 pub mod write;
 

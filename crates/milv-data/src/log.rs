@@ -1,18 +1,19 @@
 //! The dataset-level version log: `_milv/versions/<N>.json`, one file per dataset version.
 //!
 //! An entry is the commit point of a change that may touch several tables: it is created
-//! atomically (write a temp file, then hard-link it to its final name, which fails if a
-//! concurrent writer took that number first) only after every data file it names is
-//! completely written. Each table then receives the entry as one Delta commit tagged with
+//! atomically only after every data file it names is completely written — in a folder by
+//! writing a temp file and hard-linking it to its final name, on an object store by a
+//! create-if-absent put (`If-None-Match: *`); either fails if a concurrent writer took
+//! that number first. Each table then receives the entry as one Delta commit tagged with
 //! the application transaction `(milv, N)`, so applying an entry twice is a no-op and a
 //! crash between the two steps is repaired by the next writer ("roll forward").
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
 use crate::error::{Error, Result};
+use crate::store::Root;
 
 /// Folder (under the dataset root) holding the version log.
 pub const LOG_DIR: &str = "_milv/versions";
@@ -112,44 +113,31 @@ pub struct VersionEntry {
 
 pub(crate) const ENTRY_FORMAT: &str = "milv-version/1";
 
-pub(crate) fn log_dir(root: &Path) -> PathBuf {
-    root.join(LOG_DIR)
-}
-
-fn entry_path(root: &Path, version: u64) -> PathBuf {
-    log_dir(root).join(format!("{version:020}.json"))
+fn entry_name(version: u64) -> String {
+    format!("{LOG_DIR}/{version:020}.json")
 }
 
 /// All version numbers present in the log, ascending.
-pub(crate) fn list_versions(root: &Path) -> Result<Vec<u64>> {
-    let dir = log_dir(root);
-    let rd = match std::fs::read_dir(&dir) {
-        Ok(rd) => rd,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            return Err(Error::NotADataset(root.to_path_buf()));
-        }
-        Err(e) => return Err(Error::io("list versions", &dir)(e)),
+pub(crate) fn list_versions(root: &Root) -> Result<Vec<u64>> {
+    let Some(names) = root.list(LOG_DIR)? else {
+        return Err(Error::NotADataset(root.label().to_path_buf()));
     };
-    let mut out = Vec::new();
-    for ent in rd {
-        let ent = ent.map_err(Error::io("list versions", &dir))?;
-        let name = ent.file_name();
-        let Some(name) = name.to_str() else { continue };
+    let mut out: Vec<u64> = names
+        .iter()
         // Temp files start with '.', so only complete entries parse.
-        if let Some(stem) = name.strip_suffix(".json")
-            && stem.len() == 20
-            && let Ok(v) = stem.parse::<u64>()
-        {
-            out.push(v);
-        }
-    }
+        .filter_map(|name| {
+            let stem = name.strip_suffix(".json")?;
+            if stem.len() == 20 { stem.parse().ok() } else { None }
+        })
+        .collect();
     out.sort_unstable();
     Ok(out)
 }
 
-pub(crate) fn read_entry(root: &Path, version: u64) -> Result<VersionEntry> {
-    let path = entry_path(root, version);
-    let bytes = std::fs::read(&path).map_err(Error::io("read version entry", &path))?;
+pub(crate) fn read_entry(root: &Root, version: u64) -> Result<VersionEntry> {
+    let name = entry_name(version);
+    let path = root.label_of(&name);
+    let bytes = root.read(&name)?;
     let entry: VersionEntry = serde_json::from_slice(&bytes).map_err(|e| Error::BadLogEntry {
         version,
         msg: e.to_string(),
@@ -166,39 +154,10 @@ pub(crate) fn read_entry(root: &Path, version: u64) -> Result<VersionEntry> {
 }
 
 /// Atomically creates the entry for `entry.version`; `Ok(false)` if that number is taken.
-pub(crate) fn try_create_entry(root: &Path, entry: &VersionEntry) -> Result<bool> {
-    let dir = log_dir(root);
-    let tmp = dir.join(format!(".tmp-{}.json", uuid::Uuid::new_v4()));
+/// A hard link locally, a create-if-absent put on an object store: same semantics.
+pub(crate) fn try_create_entry(root: &Root, entry: &VersionEntry) -> Result<bool> {
     let bytes = serde_json::to_vec_pretty(entry).map_err(|e| Error::Invalid(e.to_string()))?;
-    write_synced(&tmp, &bytes)?;
-    let target = entry_path(root, entry.version);
-    let created = match std::fs::hard_link(&tmp, &target) {
-        Ok(()) => true,
-        Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => false,
-        Err(e) => {
-            let _ = std::fs::remove_file(&tmp);
-            return Err(Error::io("create version entry", &target)(e));
-        }
-    };
-    std::fs::remove_file(&tmp).map_err(Error::io("remove temp file", &tmp))?;
-    if created {
-        sync_dir(&dir)?;
-    }
-    Ok(created)
-}
-
-/// Writes a file and flushes it to disk, so a crash never leaves a named, partial file.
-pub(crate) fn write_synced(path: &Path, bytes: &[u8]) -> Result<()> {
-    use std::io::Write;
-    let mut f = std::fs::File::create(path).map_err(Error::io("create", path))?;
-    f.write_all(bytes).map_err(Error::io("write", path))?;
-    f.sync_all().map_err(Error::io("sync", path))
-}
-
-pub(crate) fn sync_dir(dir: &Path) -> Result<()> {
-    std::fs::File::open(dir)
-        .and_then(|f| f.sync_all())
-        .map_err(Error::io("sync folder", dir))
+    root.create_new(&entry_name(entry.version), &bytes)
 }
 
 #[cfg(test)]
@@ -220,20 +179,22 @@ mod tests {
     #[test]
     fn entries_are_created_once() {
         let dir = tempfile::tempdir().unwrap();
-        std::fs::create_dir_all(log_dir(dir.path())).unwrap();
-        assert!(try_create_entry(dir.path(), &entry(0)).unwrap());
-        assert!(!try_create_entry(dir.path(), &entry(0)).unwrap());
-        assert!(try_create_entry(dir.path(), &entry(1)).unwrap());
-        assert_eq!(list_versions(dir.path()).unwrap(), vec![0, 1]);
-        assert_eq!(read_entry(dir.path(), 1).unwrap(), entry(1));
+        let root = Root::Local(dir.path().to_path_buf());
+        root.ensure_dir(LOG_DIR).unwrap();
+        assert!(try_create_entry(&root, &entry(0)).unwrap());
+        assert!(!try_create_entry(&root, &entry(0)).unwrap());
+        assert!(try_create_entry(&root, &entry(1)).unwrap());
+        assert_eq!(list_versions(&root).unwrap(), vec![0, 1]);
+        assert_eq!(read_entry(&root, 1).unwrap(), entry(1));
         // No temp files left behind.
-        let names: Vec<_> = std::fs::read_dir(log_dir(dir.path())).unwrap().collect();
+        let names: Vec<_> = std::fs::read_dir(dir.path().join(LOG_DIR)).unwrap().collect();
         assert_eq!(names.len(), 2);
     }
 
     #[test]
     fn missing_log_is_not_a_dataset() {
         let dir = tempfile::tempdir().unwrap();
-        assert!(matches!(list_versions(dir.path()), Err(Error::NotADataset(_))));
+        let root = Root::Local(dir.path().to_path_buf());
+        assert!(matches!(list_versions(&root), Err(Error::NotADataset(_))));
     }
 }

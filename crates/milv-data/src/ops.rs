@@ -161,7 +161,7 @@ pub fn verify(ds: &Dataset, version: u64, mut progress: impl FnMut(u64)) -> Resu
     for t in TableKind::ALL {
         for f in ds.files(t, version)? {
             rep.files_checked += 1;
-            match check_file(&f, &by_id, &mut seen, &mut rep.frames_decoded, &mut progress) {
+            match check_file(ds, &f, &by_id, &mut seen, &mut rep.frames_decoded, &mut progress) {
                 Ok(rows) => {
                     rep.rows_checked += rows;
                     if rows != f.info.num_records {
@@ -201,6 +201,7 @@ pub fn verify(ds: &Dataset, version: u64, mut progress: impl FnMut(u64)) -> Resu
 }
 
 fn check_file(
+    ds: &Dataset,
     f: &TableFile,
     episodes: &BTreeMap<&str, &Episode>,
     seen: &mut BTreeMap<String, Vec<i32>>,
@@ -208,11 +209,8 @@ fn check_file(
     progress: &mut impl FnMut(u64),
 ) -> Result<u64> {
     let mut rows = 0;
-    for batch in crate::dataset::open_parquet(&f.abs_path, None)? {
-        let batch = batch.map_err(|e| Error::Parquet {
-            source: e.into(),
-            path: f.abs_path.clone(),
-        })?;
+    for batch in ds.read_file(f, None)? {
+        let batch = batch?;
         rows += batch.num_rows() as u64;
         if f.table == TableKind::Frames {
             check_frames(&batch, episodes, seen, f)?;
@@ -251,16 +249,14 @@ fn check_frames(
 
 /// Rewrites `file` without the rows of `drop` episodes into `w`'s shards, episode by episode.
 fn rewrite_without(
+    ds: &Dataset,
     file: &TableFile,
     drop: &BTreeSet<String>,
     w: &mut crate::shard::ShardWriter,
 ) -> Result<()> {
     let mut current: Option<String> = None;
-    for batch in crate::dataset::open_parquet(&file.abs_path, None)? {
-        let batch = batch.map_err(|e| Error::Parquet {
-            source: e.into(),
-            path: file.abs_path.clone(),
-        })?;
+    for batch in ds.read_file(file, None)? {
+        let batch = batch?;
         let ids = episode_ids(&batch)
             .ok_or_else(|| Error::Invalid(format!("no episode_id column: {}", file.abs_path.display())))?
             .clone();
@@ -291,17 +287,14 @@ fn rewrite_without(
     Ok(())
 }
 
-fn file_has_any(file: &TableFile, ids: &BTreeSet<String>) -> Result<bool> {
+fn file_has_any(ds: &Dataset, file: &TableFile, ids: &BTreeSet<String>) -> Result<bool> {
     if let (Some(lo), Some(hi)) = (&file.info.min_episode, &file.info.max_episode)
         && !ids.iter().any(|id| id >= lo && id <= hi)
     {
         return Ok(false);
     }
-    for batch in crate::dataset::open_parquet(&file.abs_path, Some(&["episode_id".to_string()]))? {
-        let batch = batch.map_err(|e| Error::Parquet {
-            source: e.into(),
-            path: file.abs_path.clone(),
-        })?;
+    for batch in ds.read_file(file, Some(&["episode_id"]))? {
+        let batch = batch?;
         if let Some(a) = episode_ids(&batch)
             && (0..a.len()).any(|i| ids.contains(a.value(i)))
         {
@@ -325,7 +318,7 @@ fn rewrite_files(
     }
     let mut w = txn.shard_writer(table, opts.clone())?;
     for f in &files {
-        if let Err(e) = rewrite_without(f, drop, &mut w) {
+        if let Err(e) = rewrite_without(txn.dataset(), f, drop, &mut w) {
             w.abort();
             return Err(e);
         }
@@ -356,7 +349,7 @@ pub fn delete_episodes(ds: &Dataset, ids: &[String], meta: CommitMeta) -> Result
     for t in TableKind::ALL {
         let mut touched = Vec::new();
         for f in ds.files(t, base)? {
-            if file_has_any(&f, &drop)? {
+            if file_has_any(ds, &f, &drop)? {
                 touched.push(f);
             }
         }
@@ -406,7 +399,7 @@ pub fn vacuum(ds: &Dataset, retain_hours: u64, dry_run: bool) -> Result<Vec<Stri
 /// Resume journals of ingests that never finished, older than the retention and not held
 /// (locked) by a running ingest.
 fn vacuum_journals(ds: &Dataset, retain_hours: u64, dry_run: bool) -> Result<Vec<String>> {
-    let dir = ds.root().join("_milv/staging");
+    let dir = ds.staging_dir();
     let Ok(rd) = std::fs::read_dir(&dir) else {
         return Ok(Vec::new());
     };
@@ -414,6 +407,10 @@ fn vacuum_journals(ds: &Dataset, retain_hours: u64, dry_run: bool) -> Result<Vec
     let mut out = Vec::new();
     for ent in rd.flatten() {
         let path = ent.path();
+        // Only journal files (an S3 dataset's staging folder also holds shard folders).
+        if !ent.file_type().is_ok_and(|t| t.is_file()) {
+            continue;
+        }
         let old = ent
             .metadata()
             .and_then(|m| m.modified())

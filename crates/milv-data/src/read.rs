@@ -15,7 +15,7 @@ use deltalake::arrow::array::{Array, BinaryArray, Int32Array, Int64Array, ListAr
 use serde::Serialize;
 
 use crate::columns::{column, opt_f32s};
-use crate::dataset::{Dataset, TableFile, read_file};
+use crate::dataset::{Dataset, TableFile};
 use crate::error::{Error, Result};
 use crate::rows::{AlignmentRow, CuratedRow, Row, ScoreRow};
 use crate::schema::TableKind;
@@ -105,12 +105,9 @@ pub fn rows<R: Row>(ds: &Dataset, version: u64) -> Result<Vec<R>> {
 
 /// The key-value metadata in a data file's Parquet footer (what
 /// [`ShardOptions::file_metadata`](crate::ShardOptions) wrote, e.g. `milv.scores`).
-pub fn file_metadata(file: &TableFile) -> Result<Vec<(String, String)>> {
-    use deltalake::parquet::file::reader::{FileReader as _, SerializedFileReader};
-    let f = std::fs::File::open(&file.abs_path).map_err(Error::io("open data file", &file.abs_path))?;
-    let reader = SerializedFileReader::new(f).map_err(Error::parquet(&file.abs_path))?;
-    Ok(reader
-        .metadata()
+pub fn file_metadata(ds: &Dataset, file: &TableFile) -> Result<Vec<(String, String)>> {
+    let footer = ds.file_footer(file)?;
+    Ok(footer
         .file_metadata()
         .key_value_metadata()
         .map(|kv| {
@@ -181,7 +178,7 @@ fn group_files(
     let mut out: BTreeMap<(String, String), Vec<String>> = BTreeMap::new();
     for f in ds.files(table, version)? {
         let mut seen: BTreeSet<(String, String)> = BTreeSet::new();
-        for b in read_file(&f.abs_path, Some(&[group_col, run_col]))? {
+        for b in ds.read_file(&f, Some(&[group_col, run_col]))? {
             let b = b?;
             let (g, r): (&StringArray, &StringArray) =
                 (column(&b, group_col, table)?, column(&b, run_col, table)?);
@@ -273,7 +270,7 @@ fn run_rows<R: Row>(
     let mut first: HashMap<(String, String), String> = HashMap::new();
     let mut out = Vec::new();
     for f in ds.files(R::TABLE, version)? {
-        for b in read_file(&f.abs_path, None)? {
+        for b in ds.read_file(&f, None)? {
             for r in R::from_batch(&b?)? {
                 let key = (run_of(&r).to_string(), r.group().to_string());
                 let owner = first.entry(key).or_insert_with(|| f.info.path.clone());
@@ -343,7 +340,7 @@ fn newest<R: Row>(ds: &Dataset, version: u64, pick: impl Fn(&R) -> Option<String
     let mut files: Vec<TableFile> = ds.files(R::TABLE, version)?;
     files.sort_by_key(|f| std::cmp::Reverse(f.added_in));
     for f in files {
-        for b in read_file(&f.abs_path, None)? {
+        for b in ds.read_file(&f, None)? {
             if let Some(v) = R::from_batch(&b?)?.iter().find_map(&pick) {
                 return Ok(Some(v));
             }

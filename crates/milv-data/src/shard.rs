@@ -6,6 +6,9 @@
 //! only cut between episodes. An episode that outgrows the buffer is spilled to a file of
 //! its own, written as it streams (memory stays bounded however long the clip): its row
 //! groups are cut at `max_row_group_bytes`, and aborting the episode deletes that file.
+//!
+//! For a dataset on an object store, files are written to a local staging folder and
+//! uploaded as each one closes, so memory stays bounded there too.
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -22,6 +25,7 @@ use deltalake::parquet::schema::types::ColumnPath;
 use crate::error::{Error, Result};
 use crate::log::FileAdd;
 use crate::schema::TableKind;
+use crate::store::Root;
 
 /// Size policy of the shards.
 #[derive(Clone, Debug)]
@@ -156,6 +160,9 @@ pub struct ShardWriter {
     done: Vec<ClosedShard>,
     /// How many of `done` [`ShardWriter::take_closed`] has handed out.
     taken: usize,
+    /// Object-store dataset and table folder closed files are uploaded to (`table_root`
+    /// is then a local staging folder).
+    upload: Option<(Root, String)>,
 }
 
 impl ShardWriter {
@@ -207,7 +214,42 @@ impl ShardWriter {
             pending_id: None,
             done: Vec::new(),
             taken: 0,
+            upload: None,
         })
+    }
+
+    /// A writer for new files of `table` in the dataset at `root`.
+    pub(crate) fn for_dataset(root: &Root, table: TableKind, opts: ShardOptions) -> Result<Self> {
+        match root {
+            Root::Local(dir) => ShardWriter::new(&dir.join(table.name()), table, opts),
+            Root::Object(_) => {
+                let staging = root.staging().join(table.name());
+                let mut w = ShardWriter::new(&staging, table, opts)?;
+                w.upload = Some((root.clone(), table.name().to_string()));
+                Ok(w)
+            }
+        }
+    }
+
+    /// Records a closed file, after uploading it when the dataset is remote.
+    fn closed(&mut self, shard: ClosedShard) -> Result<()> {
+        if let Some((root, table)) = &self.upload {
+            let local = self.table_root.join(&shard.file.path);
+            let uploaded = root.upload(&local, &format!("{table}/{}", shard.file.path));
+            let _ = std::fs::remove_file(&local);
+            uploaded?;
+        }
+        self.done.push(shard);
+        Ok(())
+    }
+
+    fn remove_closed(&self, path: &str) {
+        match &self.upload {
+            Some((root, table)) => root.remove(&format!("{table}/{path}")),
+            None => {
+                let _ = std::fs::remove_file(self.table_root.join(path));
+            }
+        }
     }
 
     pub fn schema(&self) -> &SchemaRef {
@@ -291,8 +333,8 @@ impl ShardWriter {
             Pending::None => Err(Error::Invalid("end_episode without begin_episode".into())),
             Pending::Spilled(mut shard) => {
                 shard.episodes.extend(id);
-                self.done.push(shard.close()?);
-                Ok(())
+                let closed = shard.close()?;
+                self.closed(closed)
             }
             Pending::Buffered { batches, bytes } => {
                 if let Some(cur) = &self.current
@@ -328,12 +370,13 @@ impl ShardWriter {
 
     fn close_current(&mut self) -> Result<()> {
         if let Some(cur) = self.current.take() {
-            self.done.push(cur.close()?);
+            let closed = cur.close()?;
+            self.closed(closed)?;
         }
         Ok(())
     }
 
-    /// Files closed since the last call (complete on disk; e.g. to journal them so an
+    /// Files closed since the last call (complete in the store; e.g. to journal them so an
     /// interrupted run can reuse them).
     pub fn take_closed(&mut self) -> Vec<ClosedShard> {
         let new = self.done[self.taken..].to_vec();
@@ -358,7 +401,7 @@ impl ShardWriter {
             cur.discard();
         }
         for c in &self.done {
-            let _ = std::fs::remove_file(self.table_root.join(&c.file.path));
+            self.remove_closed(&c.file.path);
         }
     }
 }

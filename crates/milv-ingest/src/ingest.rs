@@ -568,9 +568,9 @@ fn ingest_one(
             .map(|r| r.len() as i32),
         action_names: side.and_then(|s| s.action_names.clone()),
         state_names: side.and_then(|s| s.state_names.clone()),
-        source_uri: p.source.display().to_string(),
+        source_uri: source_name(&p.source),
         source_sha256: p.source_sha256.clone(),
-        sidecar_uri: side.map(|s| s.path.display().to_string()),
+        sidecar_uri: side.map(|s| source_name(&s.path)),
         duration_ns: st.last_ts + period,
         ingested_at_us: now_us(),
     })
@@ -582,8 +582,9 @@ fn now_us() -> i64 {
         .map_or(0, |d| d.as_micros() as i64)
 }
 
+/// How the version log names an input: its path, or the `s3://` URL it was fetched from.
 fn source_name(p: &Path) -> String {
-    p.display().to_string()
+    milv_data::store::cached_url(p).unwrap_or_else(|| p.display().to_string())
 }
 
 /// Ingests `inputs` into `ds` as one new version. Bad inputs are reported in the result and
@@ -671,7 +672,7 @@ fn ingest_attempt(
     let todo = plan_batch(ds, base, sources, plan, opts, &mut report)?;
     // Reuse what an interrupted run of this same batch already finished.
     let pending: BTreeSet<String> = todo.iter().map(|p| p.episode_id.clone()).collect();
-    let (journal, adopted) = Journal::open(ds.root(), &ds.table_root(TableKind::Frames), &pending)?;
+    let (journal, adopted) = Journal::open(ds, &pending)?;
     let adopted_ids: BTreeSet<&str> = adopted.episodes.iter().map(|e| e.episode_id.as_str()).collect();
     let (resumed, todo): (Vec<Planned>, Vec<Planned>) = todo
         .into_iter()

@@ -1,4 +1,6 @@
-//! The resume journal of an ingest run: `_milv/staging/ingest-<key>.jsonl`.
+//! The resume journal of an ingest run: `_milv/staging/ingest-<key>.jsonl` (for a dataset
+//! on S3, in a local staging folder named after the dataset's URL: a worker restarted on
+//! the same node resumes; journaled files are already uploaded).
 //!
 //! Whenever a worker closes a shard (every ~128 MiB, or after a long episode), the file and
 //! the episode rows it completes are appended here, synced. An interrupted run leaves the
@@ -11,7 +13,7 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-use milv_data::{Episode, FileAdd};
+use milv_data::{Dataset, Episode, FileAdd, TableKind};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
@@ -43,18 +45,14 @@ fn io(op: &'static str, path: &Path) -> impl FnOnce(std::io::Error) -> Error {
 impl Journal {
     /// Opens the journal of the batch made of `pending` episode ids and returns what it
     /// holds that can be reused (files still present with their recorded size).
-    pub fn open(
-        dataset: &Path,
-        frames_root: &Path,
-        pending: &BTreeSet<String>,
-    ) -> Result<(Journal, Adopted)> {
+    pub fn open(ds: &Dataset, pending: &BTreeSet<String>) -> Result<(Journal, Adopted)> {
         let mut h = Sha256::new();
         for id in pending {
             h.update(id.as_bytes());
             h.update([0]);
         }
         let key: String = h.finalize()[..12].iter().map(|b| format!("{b:02x}")).collect();
-        let dir = dataset.join("_milv/staging");
+        let dir = ds.staging_dir();
         std::fs::create_dir_all(&dir).map_err(io("create staging folder", &dir))?;
         let path = dir.join(format!("ingest-{key}.jsonl"));
         let open = |p: &Path| {
@@ -85,8 +83,9 @@ impl Journal {
         if let Ok(text) = std::fs::read_to_string(&path) {
             // A torn last line (crash mid-append) simply doesn't parse and is ignored.
             for line in text.lines().filter_map(|l| serde_json::from_str::<Line>(l).ok()) {
-                let intact = std::fs::metadata(frames_root.join(&line.file.path))
-                    .is_ok_and(|m| m.len() == line.file.size);
+                let intact = ds
+                    .file_size(TableKind::Frames, &line.file.path)
+                    .is_ok_and(|size| size == Some(line.file.size));
                 if intact && line.episodes.iter().all(|e| pending.contains(&e.episode_id)) {
                     adopted.files.push(line.file);
                     adopted.episodes.extend(line.episodes);

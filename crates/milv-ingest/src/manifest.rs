@@ -30,7 +30,8 @@ impl InputSpec {
 
 fn resolve(base: &Path, p: &str) -> PathBuf {
     let p = Path::new(p.trim());
-    if p.is_absolute() {
+    // URLs (`s3://…`) stand as they are; relative paths are relative to the manifest.
+    if p.is_absolute() || p.to_str().and_then(milv_data::store::url_scheme).is_some() {
         p.to_path_buf()
     } else {
         base.join(p)

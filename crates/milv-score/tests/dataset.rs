@@ -166,7 +166,7 @@ fn scores_equal_the_kernels_and_runs_are_idempotent_and_partitionable() {
     }
     // The normalisation is in every file's footer.
     let f = &ds.files(TableKind::Scores, 2).unwrap()[0];
-    let kv = milv_data::read::file_metadata(f).unwrap();
+    let kv = milv_data::read::file_metadata(&ds, f).unwrap();
     let params: serde_json::Value =
         serde_json::from_str(&kv.iter().find(|(k, _)| k == "milv.scores").unwrap().1).unwrap();
     assert_eq!(params["brenner_min"].as_f64(), Some(bmin));
