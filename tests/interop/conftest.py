@@ -19,30 +19,20 @@ from __future__ import annotations
 import os
 import shutil
 import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "tests" / "pyutil"))
+import milvtest  # noqa: E402
 BINARIES = ("milv-ingest", "milv-ds", "milv-score", "milv-align")
-
-
-def _has_bins(d: Path) -> bool:
-    return all((d / b).is_file() and os.access(d / b, os.X_OK) for b in BINARIES)
 
 
 @pytest.fixture(scope="session")
 def milv_bin() -> Path:
-    env = os.environ.get("MILV_BIN")
-    if env:
-        d = Path(env).resolve()
-        if not _has_bins(d):
-            pytest.fail(f"MILV_BIN={env}: {', '.join(BINARIES)} not found there (build them first)")
-        return d
-    for cand in (REPO / "target" / "debug", REPO / "target" / "release"):
-        if _has_bins(cand):
-            return cand
-    pytest.skip("milv-ingest/milv-ds not built and MILV_BIN unset")
+    return milvtest.find_milv_bin(BINARIES)
 
 
 @pytest.fixture(scope="session")

@@ -22,6 +22,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 import av
+import milvtest  # tests/pyutil, put on sys.path by conftest.py
 import numpy as np
 import pytest
 from PIL import Image
@@ -69,19 +70,11 @@ FRAMES_SCHEMA = {
 
 
 def run_cli(args: list, ok_codes=(0,)) -> subprocess.CompletedProcess:
-    args = [str(a) for a in args]
-    p = subprocess.run(args, capture_output=True, text=True, timeout=TIMEOUT)
-    if p.returncode not in ok_codes:
-        pytest.fail(f"{' '.join(args)} exited {p.returncode}\n--- stdout\n{p.stdout}\n--- stderr\n{p.stderr}")
-    return p
+    return milvtest.run_checked(args, ok_codes, TIMEOUT)
 
 
 def run_json(args: list, ok_codes=(0,)):
-    p = run_cli(args, ok_codes)
-    try:
-        return json.loads(p.stdout)
-    except json.JSONDecodeError as e:
-        pytest.fail(f"{' '.join(map(str, args))}: stdout is not one JSON document ({e})\n{p.stdout}\n{p.stderr}")
+    return milvtest.run_json(args, ok_codes, TIMEOUT)
 
 
 _req_counter = itertools.count()

@@ -40,6 +40,7 @@ os.environ.update(
     TOKENIZERS_PARALLELISM="false",
 )
 sys.path.insert(0, str(REPO / "tools" / "lerobot"))
+sys.path.insert(0, str(REPO / "tests" / "pyutil"))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 
@@ -57,23 +58,11 @@ def _per_test_datasets_cache(tmp_path, monkeypatch):
     monkeypatch.setattr(datasets.config, "HF_DATASETS_CACHE", cache)
 
 
-def _has_bins(d: Path) -> bool:
-    return all((d / b).is_file() and os.access(d / b, os.X_OK) for b in BINARIES)
-
-
 @pytest.fixture(scope="session")
 def milv_bin() -> Path:
-    env = os.environ.get("MILV_BIN")
-    if env:
-        d = Path(env).resolve()
-        if not _has_bins(d):
-            missing = [b for b in BINARIES if not (d / b).is_file()]
-            pytest.fail(f"MILV_BIN={env}: {', '.join(missing)} not found there (build them first)")
-        return d
-    for cand in (REPO / "target" / "debug", REPO / "target" / "release"):
-        if _has_bins(cand):
-            return cand
-    pytest.skip("milv-ingest/milv-ds/milv-export not built and MILV_BIN unset")
+    import milvtest
+
+    return milvtest.find_milv_bin(BINARIES)
 
 
 # --------------------------------------------------------------------------

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+import milvtest  # tests/pyutil (conftest puts it on sys.path)
 import write_dataset as wd  # tools/lerobot/write_dataset.py (conftest puts it on sys.path)
 
 HERE = Path(__file__).resolve().parent
@@ -30,19 +31,11 @@ LENGTHS = (12, 15, 18)  # distinct, so episodes can be matched by length too
 
 
 def run(args, ok_codes=(0,), timeout=TIMEOUT) -> subprocess.CompletedProcess:
-    args = [str(a) for a in args]
-    p = subprocess.run(args, capture_output=True, text=True, timeout=timeout)
-    if ok_codes is not None and p.returncode not in ok_codes:
-        pytest.fail(f"{' '.join(args)} exited {p.returncode}\n--- stdout\n{p.stdout}\n--- stderr\n{p.stderr}")
-    return p
+    return milvtest.run_checked(args, ok_codes, timeout)
 
 
 def run_json(args, ok_codes=(0,)):
-    p = run(args, ok_codes)
-    try:
-        return json.loads(p.stdout)
-    except json.JSONDecodeError as e:
-        pytest.fail(f"{' '.join(map(str, args))}: stdout is not one JSON document ({e})\n{p.stdout}\n{p.stderr}")
+    return milvtest.run_json(args, ok_codes, TIMEOUT)
 
 
 _counter = itertools.count()

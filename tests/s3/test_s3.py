@@ -40,6 +40,17 @@ def test_unsupported_locations_are_refused(milv, tmp_path):
     assert "not supported" in p.stderr, p.stderr
 
 
+def test_unsafe_commit_settings_are_refused(milv, s3):
+    for var, value in [("AWS_S3_ALLOW_UNSAFE_RENAME", "true"), ("AWS_CONDITIONAL_PUT", "disabled"),
+                       ("AWS_S3_LOCKING_PROVIDER", "dynamodb")]:
+        env = s3.env()
+        env[var] = value
+        p = subprocess.run([str(BIN / "milv-ingest"), f"s3://{BUCKET}/unsafe", str(SAMPLES / "robot_reach.mp4")],
+                           env=env, capture_output=True, text=True, timeout=120)
+        assert p.returncode != 0 and var in p.stderr and "refusing" in p.stderr, (var, p.stderr)
+    assert s3.objects("unsafe") == [], "nothing may be written under refused settings"
+
+
 def test_every_stage_round_trips_on_s3(milv, s3, inputs, tmp_path):
     ds = f"s3://{BUCKET}/demo"
     local = tmp_path / "local-ds"

@@ -61,6 +61,8 @@ pub enum Error {
         source: Box<deltalake::logstore::object_store::Error>,
         uri: String,
     },
+    #[error("refusing {setting}: {why}; unset it")]
+    UnsafeSetting { setting: String, why: &'static str },
     #[error("unsupported dataset location {uri}: {msg}")]
     Location { uri: String, msg: String },
     #[error("{0}")]

@@ -28,8 +28,8 @@ use deltalake::logstore::object_store::{
     self as os, ObjectStore, ObjectStoreExt as _, PutMode, PutOptions, PutPayload, WriteMultipart,
 };
 use deltalake::parquet::arrow::ProjectionMask;
-use deltalake::parquet::arrow::arrow_reader::ArrowReaderOptions;
 use deltalake::parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder;
+use deltalake::parquet::arrow::arrow_reader::{ArrowReaderBuilder, ArrowReaderOptions};
 use deltalake::parquet::arrow::async_reader::{AsyncFileReader, ParquetRecordBatchStreamBuilder};
 use deltalake::parquet::errors::ParquetError;
 use deltalake::parquet::file::metadata::{ParquetMetaData, ParquetMetaDataReader};
@@ -129,9 +129,9 @@ fn check_safe_s3_settings() -> Result<()> {
             }
             _ => continue,
         };
-        return Err(Error::Location {
-            uri: format!("{k}={v}"),
-            msg: format!("refusing this setting: {why}; unset it"),
+        return Err(Error::UnsafeSetting {
+            setting: format!("{k}={v}"),
+            why,
         });
     }
     Ok(())
@@ -372,20 +372,9 @@ impl Root {
         let label = self.label_of(rel);
         match self {
             Root::Local(root) => {
-                let path = root.join(rel);
-                let file = std::fs::File::open(&path).map_err(|e| missing_or_io(e, &path))?;
-                let builder =
-                    ParquetRecordBatchReaderBuilder::try_new(file).map_err(Error::parquet(&path))?;
-                let mask = columns
-                    .map(|c| ProjectionMask::columns(builder.parquet_schema(), c.iter().map(String::as_str)));
-                let builder = match mask {
-                    Some(m) => builder.with_projection(m),
-                    None => builder,
-                };
-                let reader = builder
-                    .with_batch_size(BATCH_ROWS)
+                let reader = projected(local_builder(root, rel)?, columns)
                     .build()
-                    .map_err(Error::parquet(&path))?;
+                    .map_err(Error::parquet(&label))?;
                 Ok(Box::new(reader.map(move |b| {
                     b.map_err(|e| Error::Parquet {
                         source: e.into(),
@@ -394,17 +383,7 @@ impl Root {
                 })))
             }
             Root::Object(o) => {
-                let reader = o.parquet_reader(rel)?;
-                let builder =
-                    block_on(ParquetRecordBatchStreamBuilder::new(reader)).map_err(Error::parquet(&label))?;
-                let mask = columns
-                    .map(|c| ProjectionMask::columns(builder.parquet_schema(), c.iter().map(String::as_str)));
-                let builder = match mask {
-                    Some(m) => builder.with_projection(m),
-                    None => builder,
-                };
-                let mut stream = builder
-                    .with_batch_size(BATCH_ROWS)
+                let mut stream = projected(o.builder(rel)?, columns)
                     .build()
                     .map_err(Error::parquet(&label))?;
                 Ok(Box::new(std::iter::from_fn(move || {
@@ -416,23 +395,27 @@ impl Root {
 
     /// The footer of the Parquet file `rel`.
     pub fn parquet_metadata(&self, rel: &str) -> Result<Arc<ParquetMetaData>> {
-        let label = self.label_of(rel);
-        match self {
-            Root::Local(root) => {
-                let path = root.join(rel);
-                let file = std::fs::File::open(&path).map_err(|e| missing_or_io(e, &path))?;
-                let builder =
-                    ParquetRecordBatchReaderBuilder::try_new(file).map_err(Error::parquet(&path))?;
-                Ok(builder.metadata().clone())
-            }
-            Root::Object(o) => {
-                let reader = o.parquet_reader(rel)?;
-                let builder =
-                    block_on(ParquetRecordBatchStreamBuilder::new(reader)).map_err(Error::parquet(&label))?;
-                Ok(builder.metadata().clone())
-            }
-        }
+        Ok(match self {
+            Root::Local(root) => local_builder(root, rel)?.metadata().clone(),
+            Root::Object(o) => o.builder(rel)?.metadata().clone(),
+        })
     }
+}
+
+fn local_builder(root: &Path, rel: &str) -> Result<ParquetRecordBatchReaderBuilder<std::fs::File>> {
+    let path = root.join(rel);
+    let file = std::fs::File::open(&path).map_err(|e| missing_or_io(e, &path))?;
+    ParquetRecordBatchReaderBuilder::try_new(file).map_err(Error::parquet(&path))
+}
+
+/// Only `columns` (all if `None`), in batches of [`BATCH_ROWS`].
+fn projected<T>(b: ArrowReaderBuilder<T>, columns: Option<&[String]>) -> ArrowReaderBuilder<T> {
+    let mask = columns.map(|c| ProjectionMask::columns(b.parquet_schema(), c.iter().map(String::as_str)));
+    match mask {
+        Some(m) => b.with_projection(m),
+        None => b,
+    }
+    .with_batch_size(BATCH_ROWS)
 }
 
 impl std::fmt::Debug for Root {
@@ -491,6 +474,12 @@ impl ObjectRoot {
             source: Box::new(source),
             uri,
         }
+    }
+
+    fn builder(&self, rel: &str) -> Result<ParquetRecordBatchStreamBuilder<RemoteFile>> {
+        let reader = self.parquet_reader(rel)?;
+        block_on(ParquetRecordBatchStreamBuilder::new(reader))
+            .map_err(Error::parquet(format!("{}/{rel}", self.label.display())))
     }
 
     fn parquet_reader(&self, rel: &str) -> Result<RemoteFile> {

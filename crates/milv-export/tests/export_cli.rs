@@ -4,26 +4,24 @@
 //! bit with the tables; bad selections fail clearly and leave no file.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use common::{meta, score_and_curate_imagined};
 use milv_align::{AlignOptions, align_dataset, features};
 use milv_data::arrow::array::{Array, BinaryArray, Float32Array, Int32Array, ListArray, StringArray};
-use milv_data::{CommitMeta, Dataset, Domain, Episode, Kind, TableKind};
+use milv_data::{Dataset, Domain, Episode, Kind, TableKind};
 use milv_fixtures::{Frame, ImaginedFrame, commit_episodes, commit_imagined};
 use milv_mcap::{Recording, schema};
-use milv_score::{CurateOptions, Rule, RunOptions, Source, curate, score_dataset};
 use milv_sim::env::{Task, paired_clips};
 use milv_sim::shapes;
 use rand::SeedableRng;
 
 const SIZE: u32 = 32;
 const MODEL: &str = "acg-00112233aabbccdd";
-
-fn meta() -> CommitMeta {
-    CommitMeta::for_this_process("milv-export-test", "fixture")
-}
 
 fn episode(id: &str, domain: Domain, pair: &str, n: usize) -> Episode {
     Episode {
@@ -103,22 +101,7 @@ fn dataset(dir: &Path) -> PathBuf {
         .map(|(id, f)| (id.as_str(), f.clone()))
         .collect();
     commit_imagined(&ds, MODEL, &refs, m).unwrap();
-    let opts = RunOptions {
-        source: Source::Imagined,
-        model_id: None,
-        episodes: None,
-        domain: None,
-        jobs: 1,
-        partition: None,
-        skip_bad: false,
-    };
-    score_dataset(&ds, None, &opts, meta(), &|_| {}).unwrap();
-    let c = CurateOptions {
-        run_id: None,
-        rule: Rule::TopFraction(0.8),
-        min_episode_fraction: 0.0,
-    };
-    curate(&ds, &c, meta()).unwrap();
+    score_and_curate_imagined(&ds, 0.8);
     root
 }
 

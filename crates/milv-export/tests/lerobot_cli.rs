@@ -6,13 +6,16 @@
 //! LeRobot's own reading and writing of these datasets is tested in tests/lerobot/.
 #![allow(clippy::unwrap_used)]
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::Arc;
 
+use common::{meta, score_and_curate_imagined};
 use milv_data::arrow::array::{ArrayRef, Int64Array, RecordBatch};
 use milv_data::frame_codec;
-use milv_data::{CommitMeta, Dataset, Domain, Episode};
+use milv_data::{Dataset, Domain, Episode};
 use milv_fixtures::{Frame, ImaginedFrame, commit_episodes, commit_imagined};
 use milv_ingest::{IngestOptions, NoProgress};
 use milv_lerobot::format::read_parquet;
@@ -21,10 +24,6 @@ const W: u32 = 64;
 const H: u32 = 48;
 const LENS: [usize; 3] = [12, 15, 9];
 const TASKS: [&str; 3] = ["pick the red cube", "push the block left", "pick the red cube"];
-
-fn meta() -> CommitMeta {
-    CommitMeta::for_this_process("milv-export-test", "fixture")
-}
 
 /// Frame k of episode e: a bright square moving 3 px a frame over a gradient, so every
 /// frame differs clearly from its neighbours.
@@ -528,26 +527,10 @@ fn exports_refuse_what_lerobot_cannot_hold_and_leave_nothing() {
 
 #[test]
 fn curated_export_carries_each_frames_weight() {
-    use milv_score::{CurateOptions, Rule, RunOptions, Source, curate, score_dataset};
     let tmp = tempfile::tempdir().unwrap();
     let root = dataset(tmp.path());
     let ds = Dataset::open(&root).unwrap();
-    let opts = RunOptions {
-        source: Source::Imagined,
-        model_id: None,
-        episodes: None,
-        domain: None,
-        jobs: 1,
-        partition: None,
-        skip_bad: false,
-    };
-    score_dataset(&ds, None, &opts, meta(), &|_| {}).unwrap();
-    let c = CurateOptions {
-        run_id: None,
-        rule: Rule::TopFraction(0.5),
-        min_episode_fraction: 0.0,
-    };
-    curate(&ds, &c, meta()).unwrap();
+    score_and_curate_imagined(&ds, 0.5);
     let v = ds.latest_version().unwrap();
     let curated = milv_data::read::rows::<milv_data::CuratedRow>(&ds, v).unwrap();
 
