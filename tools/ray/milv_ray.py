@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
 import signal
 import subprocess
@@ -124,6 +125,9 @@ def read_back(bin_dir: Path, dataset: str) -> dict:
     info = json.loads(subprocess.run([str(bin_dir / "milv-ds"), "info", dataset, "--json"], check=True,
                                      capture_output=True, text=True, env=worker_env()).stdout)
     opts = storage_options() if dataset.startswith("s3://") else None
+    ctx = ray.data.DataContext.get_current()
+    ctx.enable_progress_bars = False
+    logging.getLogger("ray.data").setLevel(logging.WARNING)
     tables = {}
     for name, t in info["tables"].items():
         if t.get("delta_version") is None:

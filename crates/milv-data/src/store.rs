@@ -708,43 +708,40 @@ pub fn fetch_input(path: &Path, siblings: bool) -> Result<PathBuf> {
         }
     };
     let local = cache_path(text)?;
-    let mut wanted = Vec::new();
-    match block_on(store.head(&Key::from(key))) {
-        Ok(meta) => {
-            wanted.push(meta);
-            if siblings && let Some((dir, name)) = key.rsplit_once('/').or(Some(("", key))) {
-                let stem = name.rsplit_once('.').map_or(name, |(s, _)| s);
-                let prefix = (!dir.is_empty()).then(|| Key::from(dir));
-                let all: Vec<_> =
-                    block_on(store.list(prefix.as_ref()).try_collect::<Vec<_>>()).map_err(err("list"))?;
-                wanted.extend(all.into_iter().filter(|m| {
-                    let f = m.location.filename().unwrap_or_default();
-                    m.location.as_ref() != key
-                        && f.strip_prefix(stem).is_some_and(|r| r.starts_with('.'))
-                        && m.location.as_ref()
-                            == if dir.is_empty() {
-                                f.to_string()
-                            } else {
-                                format!("{dir}/{f}")
-                            }
-                }));
-            }
-        }
-        Err(os::Error::NotFound { .. }) => {
-            let prefix = Key::from(key);
-            wanted = block_on(store.list(Some(&prefix)).try_collect::<Vec<_>>()).map_err(err("list"))?;
-            if wanted.is_empty() {
+    // Objects under `key/` make it a folder (some servers also answer HEAD for a folder,
+    // or hold an empty marker object under its name).
+    let under: Vec<_> = block_on(store.list(Some(&Key::from(key))).try_collect::<Vec<_>>())
+        .map_err(err("list"))?
+        .into_iter()
+        .filter(|m| m.location.as_ref() != key)
+        .collect();
+    let mut wanted = under;
+    if wanted.is_empty() {
+        match block_on(store.head(&Key::from(key))) {
+            Ok(meta) => wanted.push(meta),
+            Err(os::Error::NotFound { path, .. }) => {
                 return Err(Error::Store {
                     op: "fetch input",
                     source: Box::new(os::Error::NotFound {
-                        path: text.to_string(),
-                        source: "no object and no objects under this prefix".into(),
+                        path,
+                        source: "no such object, and no objects under this prefix".into(),
                     }),
                     uri: text.to_string(),
                 });
             }
+            Err(e) => return Err(err("fetch input")(e)),
         }
-        Err(e) => return Err(err("fetch input")(e)),
+        if siblings {
+            // Sidecars: `<stem>.<ext>` beside the file.
+            let (dir, name) = key.rsplit_once('/').unwrap_or(("", key));
+            let stem = name.rsplit_once('.').map_or(name, |(s, _)| s);
+            let dir = (!dir.is_empty()).then(|| Key::from(dir));
+            let listing = block_on(store.list_with_delimiter(dir.as_ref())).map_err(err("list"))?;
+            wanted.extend(listing.objects.into_iter().filter(|m| {
+                let f = m.location.filename().unwrap_or_default();
+                f != name && f.strip_prefix(stem).is_some_and(|r| r.starts_with('.'))
+            }));
+        }
     }
     for meta in wanted {
         let dest = cache_path(&format!("s3://{bucket}/{}", meta.location))?;
