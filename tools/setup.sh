@@ -8,10 +8,11 @@ log() { printf '\033[1msetup:\033[0m %s\n' "$*" >&2; }
 
 # System packages: FFmpeg development files (ffmpeg-next), clang (bindgen), the ffmpeg CLI
 # (sample generation, benchmarks), GNU time (peak RSS in benchmarks), DejaVu Sans (milv-plot
-# chart text, read from /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf).
+# chart text, read from /usr/share/fonts/truetype/dejavu/DejaVuSans.ttf), Mesa's EGL and
+# OSMesa (headless MuJoCo rendering of the alignment validation set, tools/mujoco).
 APT_PACKAGES=(pkg-config clang libclang-dev libavcodec-dev libavformat-dev libavutil-dev
   libswscale-dev libswresample-dev libavfilter-dev libavdevice-dev ffmpeg time python3-venv
-  fonts-dejavu-core)
+  fonts-dejavu-core libegl1 libgl1-mesa-dri libosmesa6)
 missing=()
 for p in "${APT_PACKAGES[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

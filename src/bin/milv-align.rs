@@ -43,7 +43,8 @@ struct RunArgs {
     #[arg(long)]
     partition: Option<Partition>,
     /// Ground-truth correspondences (JSON lines {pair_id, human_to_robot}, e.g. the
-    /// warps.jsonl of `milv-sim gen`): report the frame error of each pair.
+    /// warps.jsonl of `milv-sim gen` or tools/mujoco/paired_arms.py): report the frame
+    /// error of each pair beside the proportional warp's (the baseline to beat).
     #[arg(long)]
     truth: Option<PathBuf>,
     #[arg(long)]
@@ -180,24 +181,39 @@ fn run_align(a: RunArgs) -> anyhow::Result<u8> {
             rep.run_id,
             rep.read_version
         );
+        let num = |e: Option<f64>| e.map_or("-".into(), |e| format!("{e:.2}"));
         println!(
-            "{:<28} {:>6} {:>6} {:>10} {:>6} {:>7} {:>9}",
-            "pair", "human", "robot", "cost/dim", "path", "trusted", "err mean"
+            "{:<28} {:>6} {:>6} {:>10} {:>6} {:>7} {:>9} {:>9}",
+            "pair", "human", "robot", "cost/dim", "path", "trusted", "err mean", "prop mean"
         );
         for p in &rep.pairs {
             println!(
-                "{:<28} {:>6} {:>6} {:>10.4} {:>6} {:>7} {:>9}",
+                "{:<28} {:>6} {:>6} {:>10.4} {:>6} {:>7} {:>9} {:>9}",
                 p.pair_id,
                 p.human_frames,
                 p.robot_frames,
                 p.cost_per_dim,
                 p.path_length,
                 if p.trusted { "yes" } else { "NO" },
-                p.mean_frame_error.map_or("-".into(), |e| format!("{e:.2}"))
+                num(p.mean_frame_error),
+                num(p.proportional_mean_error),
             );
         }
-        if let (Some(m), Some(x)) = (rep.mean_frame_error, rep.max_frame_error) {
-            println!("frame error against ground truth: mean {m:.3}, max {x}");
+        if let (Some(m), Some(x), Some(pm)) = (
+            rep.mean_frame_error,
+            rep.max_frame_error,
+            rep.proportional_mean_error,
+        ) {
+            println!(
+                "frame error against ground truth: mean {m:.3}, max {x}; proportional warp: mean {pm:.3} ({:.2}x)",
+                m / pm.max(1e-9)
+            );
+            if !rep.trusted_worse_than_proportional.is_empty() {
+                println!(
+                    "trusted but worse than the proportional warp: {}",
+                    rep.trusted_worse_than_proportional.join(", ")
+                );
+            }
         }
     }
     Ok(match (rep.pairs.is_empty(), rep.failed.is_empty()) {

@@ -63,6 +63,10 @@ pub struct PairSummary {
     /// Against ground truth, when given: mean and max |recovered − true| robot frame.
     pub mean_frame_error: Option<f64>,
     pub max_frame_error: Option<usize>,
+    /// The baseline beside them: the same errors of the proportional warp (robot frame
+    /// `round(i · (m − 1) / (n − 1))`), which any feature has to beat.
+    pub proportional_mean_error: Option<f64>,
+    pub proportional_max_error: Option<usize>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -83,6 +87,11 @@ pub struct AlignReport {
     /// Mean of the pairs' mean frame errors (with ground truth).
     pub mean_frame_error: Option<f64>,
     pub max_frame_error: Option<usize>,
+    /// The proportional warp's mean error over the same pairs (the baseline).
+    pub proportional_mean_error: Option<f64>,
+    /// Trusted pairs that came out worse than the proportional warp: what a user would
+    /// train on without being warned.
+    pub trusted_worse_than_proportional: Vec<String>,
     /// Pairs this run had already aligned (a re-run is a no-op).
     pub already_aligned: usize,
 }
@@ -344,14 +353,11 @@ pub fn align_dataset(
                     .ok_or_else(|| format!("robot episode {} has no frames", r.episode_id))?;
                 let (al, d, edge) = align_pair(kind, hc, rc, opts)?;
                 let per_dim = al.normalized / d.max(1) as f64;
-                let (mean_err, max_err) = match opts.truth.get(*p) {
+                let ((mean_err, max_err), (prop_mean, prop_max)) = match opts.truth.get(*p) {
                     Some(t) if t.len() == hc.images.len() => {
                         let got = row_to_col(&al.path, hc.images.len());
-                        let errs: Vec<usize> = got.iter().zip(t).map(|(a, b)| a.abs_diff(*b)).collect();
-                        (
-                            Some(errs.iter().sum::<usize>() as f64 / errs.len() as f64),
-                            errs.iter().max().copied(),
-                        )
+                        let prop = proportional_warp(hc.images.len(), rc.images.len());
+                        (frame_errors(&got, t), frame_errors(&prop, t))
                     }
                     Some(t) => {
                         return Err(format!(
@@ -360,7 +366,7 @@ pub fn align_dataset(
                             hc.images.len()
                         ));
                     }
-                    None => (None, None),
+                    None => ((None, None), (None, None)),
                 };
                 Ok((
                     PairSummary {
@@ -376,6 +382,8 @@ pub fn align_dataset(
                         trusted: per_dim <= max_cost && edge <= 0.1,
                         mean_frame_error: mean_err,
                         max_frame_error: max_err,
+                        proportional_mean_error: prop_mean,
+                        proportional_max_error: prop_max,
                     },
                     al,
                 ))
@@ -409,6 +417,18 @@ pub fn align_dataset(
             with_truth.iter().filter_map(|s| s.mean_frame_error).sum::<f64>() / with_truth.len() as f64
         }),
         max_frame_error: with_truth.iter().filter_map(|s| s.max_frame_error).max(),
+        proportional_mean_error: (!with_truth.is_empty()).then(|| {
+            with_truth
+                .iter()
+                .filter_map(|s| s.proportional_mean_error)
+                .sum::<f64>()
+                / with_truth.len() as f64
+        }),
+        trusted_worse_than_proportional: with_truth
+            .iter()
+            .filter(|s| s.trusted && s.mean_frame_error > s.proportional_mean_error)
+            .map(|s| s.pair_id.clone())
+            .collect(),
         already_aligned,
     };
     if aligned.is_empty() {
@@ -433,6 +453,32 @@ pub fn align_dataset(
     Ok(report)
 }
 
+/// Robot frame of each of `n` human frames when the robot clip (`m` frames) is simply
+/// stretched onto the human one.
+pub fn proportional_warp(n: usize, m: usize) -> Vec<usize> {
+    (0..n)
+        .map(|i| {
+            if n > 1 {
+                (i as f64 * (m.saturating_sub(1)) as f64 / (n - 1) as f64).round() as usize
+            } else {
+                0
+            }
+        })
+        .collect()
+}
+
+/// Mean and max |got − truth| over the frames.
+fn frame_errors(got: &[usize], truth: &[usize]) -> (Option<f64>, Option<usize>) {
+    let errs: Vec<usize> = got.iter().zip(truth).map(|(a, b)| a.abs_diff(*b)).collect();
+    if errs.is_empty() {
+        return (None, None);
+    }
+    (
+        Some(errs.iter().sum::<usize>() as f64 / errs.len() as f64),
+        errs.iter().max().copied(),
+    )
+}
+
 /// The `alignments` rows of one aligned pair: its DTW path with each cell's local cost.
 fn alignment_rows(s: &PairSummary, al: &Alignment, features: &str, run_id: &str) -> Vec<AlignmentRow> {
     al.path
@@ -449,4 +495,18 @@ fn alignment_rows(s: &PairSummary, al: &Alignment, features: &str, run_id: &str)
             run_id: run_id.to_string(),
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_proportional_warp_stretches_one_clip_onto_the_other() {
+        assert_eq!(proportional_warp(5, 9), [0, 2, 4, 6, 8]);
+        assert_eq!(proportional_warp(3, 2), [0, 1, 1]);
+        assert_eq!(proportional_warp(1, 7), [0]);
+        assert_eq!(frame_errors(&[0, 2, 4], &[0, 3, 7]), (Some(4.0 / 3.0), Some(3)));
+        assert_eq!(frame_errors(&[], &[]), (None, None));
+    }
 }

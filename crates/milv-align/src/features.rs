@@ -220,14 +220,12 @@ impl FeatureKind for Motion {
         ];
         let turn = |m: &[f64; 4], r: &[f64]| [m[0] * r[1] + m[1] * r[2], m[2] * r[1] + m[3] * r[2]];
         // Compare the headings with the robot clip resampled to the human's length.
+        let stretched = crate::align::proportional_warp(human.n, robot.n);
         let mismatch = |m: &[f64; 4]| -> f64 {
-            (0..human.n)
-                .map(|i| {
-                    let j = if human.n > 1 {
-                        (i as f64 * (robot.n - 1) as f64 / (human.n - 1) as f64).round() as usize
-                    } else {
-                        0
-                    };
+            stretched
+                .iter()
+                .enumerate()
+                .map(|(i, &j)| {
                     let (hr, rr) = (human.row(i), turn(m, robot.row(j)));
                     (hr[1] - rr[0]).powi(2) + (hr[2] - rr[1]).powi(2)
                 })

@@ -1,0 +1,70 @@
+"""The alignment validation set that is not milv-sim (tools/mujoco/paired_arms.py): three
+pairs rendered headless with MuJoCo, ingested with their sidecars, aligned against their
+ground-truth warps with the proportional warp reported beside every error.
+
+What this pins down: the warps are real (stretching one clip onto the other is off by
+≥ 2.5 frames on average), the ground truth is right (the end-effector states, an oracle,
+recover it to within a frame), and every report carries the proportional baseline.
+The pixel features' accuracy on this set is measured in BENCHMARKS.md, not asserted here.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(REPO / "tests" / "pyutil"))
+import milvtest  # noqa: E402
+
+GENERATOR = REPO / "tools" / "mujoco" / "paired_arms.py"
+
+
+@pytest.fixture(scope="module")
+def mujoco_set(tmp_path_factory) -> Path:
+    pytest.importorskip("mujoco")
+    out = tmp_path_factory.mktemp("mujoco") / "set"
+    env = dict(os.environ, MUJOCO_GL=os.environ.get("MUJOCO_GL", "egl"))
+    p = subprocess.run(
+        [sys.executable, str(GENERATOR), str(out), "--pairs", "3", "--seed", "1"],
+        capture_output=True, text=True, timeout=600, env=env,
+    )
+    assert p.returncode == 0, p.stderr
+    return out
+
+
+def test_warps_are_real_and_the_ground_truth_holds(mujoco_set, milv_bin, tmp_path):
+    summary = json.loads((mujoco_set / "summary.json").read_text())
+    assert len(summary["pairs"]) == 3
+    warps = [json.loads(line) for line in (mujoco_set / "warps.jsonl").read_text().splitlines()]
+    for w in warps:
+        assert 50 <= w["human_frames"] <= 80 and 50 <= w["robot_frames"] <= 80
+        m = w["human_to_robot"]
+        assert len(m) == w["human_frames"] and m == sorted(m) and m[0] >= 0 and m[-1] < w["robot_frames"]
+    ds = tmp_path / "ds"
+    ing = milvtest.run_json([milv_bin / "milv-ingest", ds, "--manifest", mujoco_set / "manifest.jsonl", "--json"])
+    assert len(ing["ingested"]) == 6 and not ing.get("failed"), ing
+    truth = mujoco_set / "warps.jsonl"
+    state = milvtest.run_json(
+        [milv_bin / "milv-align", ds, "--features", "state", "--truth", truth, "--json"])
+    assert len(state["pairs"]) == 3 and not state["failed"]
+    # The generator's own baseline and the aligner's agree.
+    assert state["proportional_mean_error"] == pytest.approx(summary["proportional_mean_error"], abs=1e-9)
+    assert state["proportional_mean_error"] >= 2.5, state
+    for p in state["pairs"]:
+        assert p["proportional_mean_error"] is not None and p["proportional_max_error"] is not None
+    # The end-effector path itself recovers the warps: the ground truth is consistent.
+    assert state["mean_frame_error"] <= 1.0, state
+    assert state["mean_frame_error"] <= 0.3 * state["proportional_mean_error"], state
+    # Pixel features report the same baseline beside their own error.
+    motion = milvtest.run_json(
+        [milv_bin / "milv-align", ds, "--features", "motion", "--truth", truth, "--json"])
+    assert motion["proportional_mean_error"] == pytest.approx(state["proportional_mean_error"])
+    worse = {p["pair_id"] for p in motion["pairs"]
+             if p["trusted"] and p["mean_frame_error"] > p["proportional_mean_error"]}
+    assert set(motion["trusted_worse_than_proportional"]) == worse
