@@ -68,3 +68,15 @@ def test_warps_are_real_and_the_ground_truth_holds(mujoco_set, milv_bin, tmp_pat
     worse = {p["pair_id"] for p in motion["pairs"]
              if p["trusted"] and p["mean_frame_error"] > p["proportional_mean_error"]}
     assert set(motion["trusted_worse_than_proportional"]) == worse
+
+
+def test_the_diagnostic_ladder_runs_on_the_set(mujoco_set):
+    p = subprocess.run(
+        [sys.executable, str(REPO / "tools" / "mujoco" / "oracle_rungs.py"), str(mujoco_set), "--json"],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert p.returncode == 0, p.stderr
+    s = json.loads(p.stdout)["summary"]
+    # The true 3-D path recovers the warps; the proportional warp does not.
+    assert s["progress3d"]["mean"] <= 1.0 < 2.5 <= s["prop"]["mean"], s
+    assert set(s) == {"prop", "progress3d", "progress2d", "progress2d+H"}

@@ -343,7 +343,7 @@ def generate(out: Path, pairs: int, seed: int, split: str) -> dict:
         az_human = rng.uniform(-170, -10)
         while abs(az_human - az_robot) < 40:
             az_human = rng.uniform(-170, -10)
-        clips = {}
+        clips, cameras = {}, {}
         for domain, arm_xml, rest, azimuth in (
             ("robot", robot_xml, [1.57, 0.3, 1.2, 1.2], az_robot),
             ("human", human_xml, [-1.57, 0.6, 0.0, -1.2, 0.3], az_human),
@@ -362,13 +362,14 @@ def generate(out: Path, pairs: int, seed: int, split: str) -> dict:
             write_clip(out, name, frames, ee, episode)
             manifest.append({"path": f"{name}.mp4", "sidecar": f"{name}.json"})
             clips[domain] = s
+            cameras[domain] = {"pos": [round(c, 4) for c in cam], "target": [0.0, 0.0, TABLE_TOP], "fovy": round(fovy, 2)}
         truth = truth_map(clips["human"], clips["robot"])
         nh, nr = len(clips["human"]), len(clips["robot"])
         # Half away from zero, as milv-align rounds (Python's round() goes to even).
         prop = [math.floor(k * (nr - 1) / (nh - 1) + 0.5) for k in range(nh)]
         err = [abs(a - b) for a, b in zip(prop, truth)]
         warps.append({"pair_id": pair_id, "human_frames": nh, "robot_frames": nr, "human_to_robot": truth})
-        summary.append({"pair_id": pair_id, "human_frames": nh, "robot_frames": nr,
+        summary.append({"pair_id": pair_id, "human_frames": nh, "robot_frames": nr, "cameras": cameras,
                         "proportional_mean_error": sum(err) / nh, "proportional_max_error": max(err)})
         print(f"{pair_id}: human {nh} frames, robot {nr} frames, proportional warp "
               f"mean error {sum(err) / nh:.2f}, max {max(err)}", file=sys.stderr)
