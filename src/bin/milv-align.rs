@@ -16,7 +16,7 @@ use milv::data::{CommitMeta, Dataset, DatasetRef, Partition};
 /// new version. Prints a per-pair summary: normalised cost, path length, and a trust flag
 /// for pairs whose cost is high or whose path runs along the band's edge.
 ///
-///   milv-align DATASET[@V] --features motion|state|translated [--band F] [--jobs N]
+///   milv-align DATASET[@V] --features motion|track|state|translated [--band F] [--jobs N]
 ///   milv-align show DATASET[@V] PAIR -o cost.png
 #[derive(Parser, Debug)]
 #[command(version, args_conflicts_with_subcommands = true)]
@@ -54,7 +54,10 @@ struct RunArgs {
 #[derive(clap::Args, Debug, Clone)]
 struct Common {
     /// motion: progress and heading of the arm's tip, tracked from frame differences and
-    /// mapped onto the table plane (any clip); state: the episodes' state vectors (e.g.
+    /// mapped onto the table plane (any clip); track: the human's hand followed by image
+    /// feature points, against the robot's end-effector states mapped into the human's
+    /// view by an affine camera fitted per pair (robot clips need states; no scene
+    /// assumption); state: the episodes' state vectors (e.g.
     /// end-effector position); translated: the human clip translated to the robot domain
     /// (imagined table) against the robot frames.
     #[arg(long, default_value = "motion")]
@@ -69,7 +72,7 @@ struct Common {
     #[arg(long)]
     model_id: Option<String>,
     /// Pairs above this normalised cost per feature dimension are flagged untrusted
-    /// (default per feature kind: motion 0.002, state 0.002, translated 0.5).
+    /// (default per feature kind: motion 0.002, track 0.01, state 0.002, translated 0.5).
     #[arg(long)]
     max_cost: Option<f64>,
 }

@@ -176,6 +176,17 @@ fn resolve_model(ds: &Dataset, v: u64, wanted: Option<&str>) -> Result<String> {
     }
 }
 
+/// The band's half-width in columns for clips of `n` and `m` frames.
+fn band_width(n: usize, m: usize, opts: &AlignOptions) -> usize {
+    (opts.band * n.max(m) as f64).ceil() as usize
+}
+
+/// DTW of two feature matrices in the run's band, with its step pattern.
+fn banded_dtw(a: &crate::Features, b: &crate::Features, opts: &AlignOptions) -> Result<Alignment> {
+    let band = Band::around_diagonal(a.n, b.n, band_width(a.n, b.n, opts));
+    dtw(a, b, &band, opts.step, true)
+}
+
 /// Aligns one pair's clips.
 fn align_pair(
     kind: &dyn FeatureKind,
@@ -193,15 +204,15 @@ fn align_pair(
         }
     }
     let h = kind.extract(human).map_err(|e| e.to_string())?;
-    let r = kind.extract(robot).map_err(|e| e.to_string())?;
+    let r = kind.fit_pair(&h, kind.extract(robot).map_err(|e| e.to_string())?, &|a, b| {
+        banded_dtw(a, b, opts).ok().map(|al| row_to_col(&al.path, a.n))
+    });
     if h.d != r.d {
         return Err(format!("feature widths differ: human {} and robot {}", h.d, r.d));
     }
-    let r = kind.fit_pair(&h, r);
     let (n, m) = (h.n, r.n);
-    let w = (opts.band * n.max(m) as f64).ceil() as usize;
-    let band = Band::around_diagonal(n, m, w);
-    let al = dtw(&h, &r, &band, opts.step, true).map_err(|e| e.to_string())?;
+    let w = band_width(n, m, opts);
+    let al = banded_dtw(&h, &r, opts).map_err(|e| e.to_string())?;
     let edge = al
         .path
         .iter()
@@ -248,7 +259,9 @@ pub fn load_pair(
     let (al, _, _) =
         align_pair(kind, hc, rc, opts).map_err(|m| Error::Invalid(format!("pair {pair_id}: {m}")))?;
     let hf = kind.extract(hc)?;
-    let rf = kind.fit_pair(&hf, kind.extract(rc)?);
+    let rf = kind.fit_pair(&hf, kind.extract(rc)?, &|a, b| {
+        banded_dtw(a, b, opts).ok().map(|al| row_to_col(&al.path, a.n))
+    });
     Ok((hf, rf, al))
 }
 

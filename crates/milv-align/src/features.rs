@@ -45,6 +45,46 @@ impl Clip {
             .map_err(|e| bad(e.to_string()))?;
         Ok((rgb, self.width as usize, self.height as usize))
     }
+
+    /// Every frame decoded to RGB24, and their common size.
+    pub fn all_rgb(&self) -> Result<(Vec<Vec<u8>>, usize, usize), Error> {
+        let mut frames = Vec::with_capacity(self.images.len());
+        let mut size = None;
+        for t in 0..self.images.len() {
+            let (rgb, w, h) = self.rgb(t)?;
+            if *size.get_or_insert((w, h)) != (w, h) {
+                return Err(Error::Invalid(format!(
+                    "episode {}: frame {t} changes size",
+                    self.episode_id
+                )));
+            }
+            frames.push(rgb);
+        }
+        let (w, h) =
+            size.ok_or_else(|| Error::Invalid(format!("episode {} has no frames", self.episode_id)))?;
+        Ok((frames, w, h))
+    }
+
+    /// The state vectors as rows of one width; `hint` says what to use instead.
+    pub fn state_rows(&self, hint: &str) -> Result<Vec<Vec<f64>>, Error> {
+        let states = self.states.as_ref().ok_or_else(|| {
+            Error::Invalid(format!(
+                "episode {} has no state vectors ({hint})",
+                self.episode_id
+            ))
+        })?;
+        let d = states.first().map_or(0, Vec::len);
+        if d == 0 || states.iter().any(|s| s.len() != d) {
+            return Err(Error::Invalid(format!(
+                "episode {}: state vectors missing or of mixed widths",
+                self.episode_id
+            )));
+        }
+        Ok(states
+            .iter()
+            .map(|s| s.iter().map(|&v| f64::from(v)).collect())
+            .collect())
+    }
 }
 
 /// Which table each side's frames come from.
@@ -73,11 +113,17 @@ pub trait FeatureKind: Sync {
     }
 
     /// Adjusts the robot features to the human ones before alignment (e.g. resolving
-    /// camera axis flips). Default: nothing.
-    fn fit_pair(&self, _human: &Features, robot: Features) -> Features {
+    /// camera axis flips, or mapping robot states into the human's image), and may use
+    /// `align` (the pair's own DTW: band and step pattern) to do it. The result must have
+    /// the human features' width. Default: nothing.
+    fn fit_pair(&self, _human: &Features, robot: Features, _align: &Aligner) -> Features {
         robot
     }
 }
+
+/// The DTW a pair is aligned with (its band and step pattern), as the robot frame of
+/// every human frame; `None` when the two feature matrices cannot be aligned.
+pub type Aligner<'a> = dyn Fn(&Features, &Features) -> Option<Vec<usize>> + 'a;
 
 /// End-effector / state columns, each scaled to [0, 1] by its range over the clip (see
 /// [`Features::range_normalized`]). Both episodes must carry states of the same width.
@@ -94,21 +140,9 @@ impl FeatureKind for State {
     }
 
     fn extract(&self, clip: &Clip) -> Result<Features, Error> {
-        let states = clip.states.as_ref().ok_or_else(|| {
-            Error::Invalid(format!(
-                "episode {} has no state vectors (use --features motion)",
-                clip.episode_id
-            ))
-        })?;
-        let d = states.first().map_or(0, Vec::len);
-        if d == 0 || states.iter().any(|s| s.len() != d) {
-            return Err(Error::Invalid(format!(
-                "episode {}: state vectors missing or of mixed widths",
-                clip.episode_id
-            )));
-        }
-        let data = states.iter().flatten().map(|&v| f64::from(v)).collect();
-        Ok(Features::new(states.len(), d, data)?.range_normalized())
+        let rows = clip.state_rows("use --features motion")?;
+        let d = rows[0].len();
+        Ok(Features::new(rows.len(), d, rows.concat())?.range_normalized())
     }
 }
 
@@ -150,25 +184,12 @@ impl FeatureKind for Motion {
     }
 
     fn extract(&self, clip: &Clip) -> Result<Features, Error> {
-        let n = clip.images.len();
-        let mut tracker: Option<(motion::TipTracker, (usize, usize))> = None;
-        for t in 0..n {
-            let (rgb, w, h) = clip.rgb(t)?;
-            let (tr, size) = tracker.get_or_insert_with(|| (motion::TipTracker::new(w, h, n), (w, h)));
-            if *size != (w, h) {
-                return Err(Error::Invalid(format!(
-                    "episode {}: frame {t} changes size",
-                    clip.episode_id
-                )));
-            }
-            tr.push(rgb);
+        let (frames, w, h) = clip.all_rgb()?;
+        let n = frames.len();
+        let mut tracker = motion::TipTracker::new(w, h, n);
+        for f in frames {
+            tracker.push(f);
         }
-        let Some((tracker, (w, h))) = tracker else {
-            return Err(Error::Invalid(format!(
-                "episode {} has no frames",
-                clip.episode_id
-            )));
-        };
         let track = tracker.finish().ok_or_else(|| {
             Error::Invalid(format!(
                 "episode {}: nothing moves in the clip (motion features need a moving arm)",
@@ -206,7 +227,7 @@ impl FeatureKind for Motion {
         Features::new(n, MOTION_D, data)
     }
 
-    fn fit_pair(&self, human: &Features, robot: Features) -> Features {
+    fn fit_pair(&self, human: &Features, robot: Features, _align: &Aligner) -> Features {
         // The 8 symmetries of the square, as maps of the heading (x, y).
         const D4: [[f64; 4]; 8] = [
             [1.0, 0.0, 0.0, 1.0],
@@ -297,8 +318,9 @@ pub fn by_name(name: &str) -> Result<&'static dyn FeatureKind, Error> {
         "motion" => Ok(&Motion),
         "state" => Ok(&State),
         "translated" => Ok(&Translated),
+        "track" => Ok(&crate::track::Track),
         _ => Err(Error::Invalid(format!(
-            "unknown features {name:?} (motion | state | translated)"
+            "unknown features {name:?} (motion | track | state | translated)"
         ))),
     }
 }
@@ -375,7 +397,7 @@ mod tests {
                 / 30.0
         };
         assert!(heading_dot(&from_top) < -0.8, "{}", heading_dot(&from_top));
-        let fitted = Motion.fit_pair(&from_bottom, from_top);
+        let fitted = Motion.fit_pair(&from_bottom, from_top, &|_, _| None);
         assert!(heading_dot(&fitted) > 0.8, "{}", heading_dot(&fitted));
         // A clip where nothing moves has no motion features.
         let still = clip(0, &[0.5; 4], &[0.3; 4]);

@@ -7,14 +7,18 @@
 //! | module | what |
 //! |---|---|
 //! | [`dtw`] | banded DTW (Sakoe–Chiba, O(n·band) memory), step patterns, [`Features`] |
-//! | [`features`] | the [`FeatureKind`] trait and its kinds: `motion`, `state`, `translated` |
+//! | [`features`] | the [`FeatureKind`] trait and its kinds: `motion`, `track`, `state`, `translated` |
 //! | [`motion`] | tip tracking from frame differences, table-plane rectification, track filters |
+//! | [`klt`] | feature-point tracking (Shi–Tomasi + pyramidal Lucas–Kanade) of the most travelled points |
+//! | [`track`] | the `track` kind: the human's tracked hand vs the robot's states through a per-pair affine camera |
 //! | [`align`] | [`align_dataset`]: every pair of a dataset version, in parallel, into the `alignments` table; per-pair summaries and ground-truth errors |
 
 pub mod align;
 pub mod dtw;
 pub mod features;
+pub mod klt;
 pub mod motion;
+pub mod track;
 
 pub use align::{AlignOptions, AlignReport, PairSummary, align_dataset, load_pair};
 pub use dtw::{Alignment, Band, Features, StepPattern, dtw, row_to_col};

@@ -51,7 +51,7 @@ struct FrameMotion {
 
 /// `|frame_b − frame_a|` per pixel (RGB distance), box-blurred over 3×3 so a single
 /// noisy pixel does not count as motion.
-fn motion_map(a: &[u8], b: &[u8], w: usize, h: usize) -> Vec<f32> {
+pub(crate) fn motion_map(a: &[u8], b: &[u8], w: usize, h: usize) -> Vec<f32> {
     let d: Vec<f32> = a
         .chunks_exact(3)
         .zip(b.chunks_exact(3))
@@ -209,7 +209,7 @@ impl TipTracker {
     }
 }
 
-fn luma(p: &[u8]) -> u8 {
+pub(crate) fn luma(p: &[u8]) -> u8 {
     (0.299 * f64::from(p[0]) + 0.587 * f64::from(p[1]) + 0.114 * f64::from(p[2])).round() as u8
 }
 

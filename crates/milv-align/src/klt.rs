@@ -1,0 +1,379 @@
+//! Feature-point tracking (Shi–Tomasi corners followed by pyramidal Lucas–Kanade with a
+//! forward–backward check): where the most travelled points of a clip's moving region go.
+//!
+//! Nothing here knows the scene: no table, no border the arm enters from. Corners are
+//! picked in the first frame wherever anything moves later; the points that travel
+//! farthest are on the part of the arm farthest from its fixed base, i.e. the hand or
+//! gripper, whatever the camera.
+
+use crate::motion;
+
+/// LK window half-width (9×9 window).
+const HALF_WIN: isize = 4;
+/// Pyramid levels above the full image.
+const LEVELS: usize = 2;
+const LK_ITERS: usize = 30;
+const LK_EPS: f64 = 0.01;
+/// A point whose forward-then-backward track misses its start by more (pixels) is lost.
+const FB_MAX: f64 = 1.0;
+const MAX_CORNERS: usize = 300;
+const CORNER_QUALITY: f32 = 0.01;
+const MIN_DISTANCE: f64 = 2.0;
+/// Frame differences (RGB distance, 3×3 mean) above this count as motion for the mask.
+const MASK_MOTION: f32 = 12.0;
+/// The tracked points whose per-frame median makes the track.
+pub const TOP_POINTS: usize = 3;
+
+/// A grey image (luma in [0, 1]) with bilinear sampling, clamped at the border.
+#[derive(Clone)]
+struct Gray {
+    w: usize,
+    h: usize,
+    v: Vec<f32>,
+}
+
+impl Gray {
+    fn from_rgb(rgb: &[u8], w: usize, h: usize) -> Gray {
+        Gray {
+            w,
+            h,
+            v: rgb
+                .chunks_exact(3)
+                .map(|p| f32::from(motion::luma(p)) / 255.0)
+                .collect(),
+        }
+    }
+
+    fn at(&self, x: isize, y: isize) -> f32 {
+        let x = x.clamp(0, self.w as isize - 1) as usize;
+        let y = y.clamp(0, self.h as isize - 1) as usize;
+        self.v[y * self.w + x]
+    }
+
+    fn sample(&self, x: f64, y: f64) -> f64 {
+        let (x0, y0) = (x.floor(), y.floor());
+        let (fx, fy) = (x - x0, y - y0);
+        let (x0, y0) = (x0 as isize, y0 as isize);
+        let p = |dx, dy| f64::from(self.at(x0 + dx, y0 + dy));
+        (1.0 - fy) * ((1.0 - fx) * p(0, 0) + fx * p(1, 0)) + fy * ((1.0 - fx) * p(0, 1) + fx * p(1, 1))
+    }
+
+    /// Half size, smoothed with the 5-tap binomial kernel first (as `cv::pyrDown`).
+    fn down(&self) -> Gray {
+        const K: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+        let (w, h) = (self.w.div_ceil(2), self.h.div_ceil(2));
+        let mut v = Vec::with_capacity(w * h);
+        for y in 0..h {
+            for x in 0..w {
+                let mut s = 0.0;
+                for (j, ky) in K.iter().enumerate() {
+                    for (i, kx) in K.iter().enumerate() {
+                        s += ky
+                            * kx
+                            * self.at(2 * x as isize + i as isize - 2, 2 * y as isize + j as isize - 2);
+                    }
+                }
+                v.push(s);
+            }
+        }
+        Gray { w, h, v }
+    }
+
+    /// Scharr derivatives (x, y), scaled to intensity per pixel.
+    fn gradients(&self) -> (Gray, Gray) {
+        let mut gx = Vec::with_capacity(self.v.len());
+        let mut gy = Vec::with_capacity(self.v.len());
+        for y in 0..self.h as isize {
+            for x in 0..self.w as isize {
+                let p = |dx, dy| self.at(x + dx, y + dy);
+                gx.push(
+                    (3.0 * (p(1, -1) - p(-1, -1)) + 10.0 * (p(1, 0) - p(-1, 0)) + 3.0 * (p(1, 1) - p(-1, 1)))
+                        / 32.0,
+                );
+                gy.push(
+                    (3.0 * (p(-1, 1) - p(-1, -1)) + 10.0 * (p(0, 1) - p(0, -1)) + 3.0 * (p(1, 1) - p(1, -1)))
+                        / 32.0,
+                );
+            }
+        }
+        let g = |v| Gray {
+            w: self.w,
+            h: self.h,
+            v,
+        };
+        (g(gx), g(gy))
+    }
+}
+
+/// One frame's pyramid: images and their gradients, finest first.
+struct Pyramid {
+    levels: Vec<(Gray, Gray, Gray)>,
+}
+
+impl Pyramid {
+    fn new(img: Gray) -> Pyramid {
+        let mut levels = Vec::with_capacity(LEVELS + 1);
+        let mut cur = img;
+        for l in 0..=LEVELS {
+            let next = (l < LEVELS).then(|| cur.down());
+            let (gx, gy) = cur.gradients();
+            levels.push((cur, gx, gy));
+            match next {
+                Some(n) => cur = n,
+                None => break,
+            }
+        }
+        Pyramid { levels }
+    }
+}
+
+/// Where point `p` of frame `a` is in frame `b`; `None` when the window leaves the image
+/// or has no texture to lock on to.
+fn lk(a: &Pyramid, b: &Pyramid, p: (f64, f64)) -> Option<(f64, f64)> {
+    let mut g = (0.0f64, 0.0f64);
+    for l in (0..a.levels.len()).rev() {
+        let (ia, gx, gy) = &a.levels[l];
+        let (ib, _, _) = &b.levels[l];
+        let s = f64::from(1u32 << l);
+        let (px, py) = (p.0 / s, p.1 / s);
+        let (mut gxx, mut gxy, mut gyy) = (0.0, 0.0, 0.0);
+        let mut win = Vec::with_capacity(((2 * HALF_WIN + 1) * (2 * HALF_WIN + 1)) as usize);
+        for oy in -HALF_WIN..=HALF_WIN {
+            for ox in -HALF_WIN..=HALF_WIN {
+                let (x, y) = (px + ox as f64, py + oy as f64);
+                let (dx, dy) = (gx.sample(x, y), gy.sample(x, y));
+                gxx += dx * dx;
+                gxy += dx * dy;
+                gyy += dy * dy;
+                win.push((x, y, ia.sample(x, y), dx, dy));
+            }
+        }
+        let count = win.len() as f64;
+        let det = gxx * gyy - gxy * gxy;
+        let min_eig = 0.5 * (gxx + gyy - ((gxx - gyy).powi(2) + 4.0 * gxy * gxy).sqrt());
+        if min_eig / count < 1e-4 || det.abs() < 1e-12 {
+            return None;
+        }
+        let mut v = (0.0f64, 0.0f64);
+        for _ in 0..LK_ITERS {
+            let (mut bx, mut by) = (0.0, 0.0);
+            for &(x, y, i, dx, dy) in &win {
+                let e = i - ib.sample(x + g.0 + v.0, y + g.1 + v.1);
+                bx += e * dx;
+                by += e * dy;
+            }
+            let eta = ((gyy * bx - gxy * by) / det, (gxx * by - gxy * bx) / det);
+            v = (v.0 + eta.0, v.1 + eta.1);
+            if eta.0.hypot(eta.1) < LK_EPS {
+                break;
+            }
+        }
+        let (qx, qy) = (px + g.0 + v.0, py + g.1 + v.1);
+        if qx < 0.0 || qy < 0.0 || qx > (ib.w - 1) as f64 || qy > (ib.h - 1) as f64 {
+            return None;
+        }
+        g = if l > 0 {
+            (2.0 * (g.0 + v.0), 2.0 * (g.1 + v.1))
+        } else {
+            (g.0 + v.0, g.1 + v.1)
+        };
+    }
+    Some((p.0 + g.0, p.1 + g.1))
+}
+
+/// Shi–Tomasi corners of `img` inside `mask`, strongest first, at least
+/// [`MIN_DISTANCE`] apart.
+fn corners(img: &Gray, mask: &[bool]) -> Vec<(f64, f64)> {
+    let (w, h) = (img.w, img.h);
+    let (gx, gy) = img.gradients();
+    let mut eig = vec![0.0f32; w * h];
+    for y in 1..h.saturating_sub(1) {
+        for x in 1..w.saturating_sub(1) {
+            let (mut a, mut b, mut c) = (0.0f32, 0.0f32, 0.0f32);
+            for yy in y - 1..=y + 1 {
+                for xx in x - 1..=x + 1 {
+                    let (dx, dy) = (gx.v[yy * w + xx], gy.v[yy * w + xx]);
+                    a += dx * dx;
+                    b += dx * dy;
+                    c += dy * dy;
+                }
+            }
+            eig[y * w + x] = 0.5 * (a + c - ((a - c).powi(2) + 4.0 * b * b).sqrt());
+        }
+    }
+    let max = eig.iter().copied().fold(0.0f32, f32::max);
+    if max <= 0.0 {
+        return Vec::new();
+    }
+    let mut cand: Vec<(f32, usize, usize)> = Vec::new();
+    for y in 1..h.saturating_sub(1) {
+        for x in 1..w.saturating_sub(1) {
+            let e = eig[y * w + x];
+            let local_max = (y - 1..=y + 1).all(|yy| (x - 1..=x + 1).all(|xx| eig[yy * w + xx] <= e));
+            if mask[y * w + x] && e >= CORNER_QUALITY * max && local_max {
+                cand.push((e, x, y));
+            }
+        }
+    }
+    cand.sort_by(|a, b| b.0.total_cmp(&a.0).then((a.2, a.1).cmp(&(b.2, b.1))));
+    let mut out: Vec<(f64, f64)> = Vec::new();
+    for (_, x, y) in cand {
+        let p = (x as f64, y as f64);
+        if out.iter().all(|q| (q.0 - p.0).hypot(q.1 - p.1) >= MIN_DISTANCE) {
+            out.push(p);
+            if out.len() == MAX_CORNERS {
+                break;
+            }
+        }
+    }
+    out
+}
+
+/// Pixels that change between frames t−1 and t+1 anywhere in the clip, grown by 2 pixels.
+fn motion_mask(frames: &[Vec<u8>], w: usize, h: usize) -> Vec<bool> {
+    let n = frames.len();
+    let mut any = vec![false; w * h];
+    for t in 0..n {
+        let d = motion::motion_map(&frames[t.saturating_sub(1)], &frames[(t + 1).min(n - 1)], w, h);
+        for (m, v) in any.iter_mut().zip(d) {
+            *m |= v > MASK_MOTION;
+        }
+    }
+    let mut grown = vec![false; w * h];
+    for y in 0..h {
+        for x in 0..w {
+            if any[y * w + x] {
+                for yy in y.saturating_sub(2)..(y + 3).min(h) {
+                    for xx in x.saturating_sub(2)..(x + 3).min(w) {
+                        grown[yy * w + xx] = true;
+                    }
+                }
+            }
+        }
+    }
+    grown
+}
+
+/// The track of a clip (RGB24 frames of `w`×`h`): per frame, the median position (pixels)
+/// of the [`TOP_POINTS`] points that travel farthest among those tracked through the whole
+/// clip; `None` when nothing moves or no point survives.
+pub fn hand_track(frames: &[Vec<u8>], w: usize, h: usize) -> Option<Vec<(f64, f64)>> {
+    let n = frames.len();
+    if n < 2 {
+        return None;
+    }
+    let mask = motion_mask(frames, w, h);
+    let pyr: Vec<Pyramid> = frames
+        .iter()
+        .map(|f| Pyramid::new(Gray::from_rgb(f, w, h)))
+        .collect();
+    let start = corners(&pyr[0].levels[0].0, &mask);
+    let mut pts: Vec<Vec<(f64, f64)>> = start.iter().map(|&p| vec![p]).collect();
+    let mut alive = vec![true; start.len()];
+    for t in 1..n {
+        for (k, track) in pts.iter_mut().enumerate() {
+            let p = track[t - 1];
+            let next = if alive[k] {
+                lk(&pyr[t - 1], &pyr[t], p).filter(|&q| {
+                    lk(&pyr[t], &pyr[t - 1], q)
+                        .is_some_and(|back| (back.0 - p.0).hypot(back.1 - p.1) < FB_MAX)
+                })
+            } else {
+                None
+            };
+            match next {
+                Some(q) => track.push(q),
+                None => {
+                    alive[k] = false;
+                    track.push(p);
+                }
+            }
+        }
+    }
+    let mut travelled: Vec<(f64, usize)> = pts
+        .iter()
+        .enumerate()
+        .filter(|&(k, _)| alive[k])
+        .map(|(k, tr)| {
+            (
+                tr.windows(2)
+                    .map(|s| (s[1].0 - s[0].0).hypot(s[1].1 - s[0].1))
+                    .sum(),
+                k,
+            )
+        })
+        .collect();
+    travelled.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    let top: Vec<usize> = travelled
+        .iter()
+        .take(TOP_POINTS)
+        .filter(|t| t.0 > 0.0)
+        .map(|t| t.1)
+        .collect();
+    if top.is_empty() {
+        return None;
+    }
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let m = v.len() / 2;
+        if v.len() % 2 == 1 {
+            v[m]
+        } else {
+            0.5 * (v[m - 1] + v[m])
+        }
+    };
+    Some(
+        (0..n)
+            .map(|t| {
+                (
+                    median(top.iter().map(|&k| pts[k][t].0).collect()),
+                    median(top.iter().map(|&k| pts[k][t].1).collect()),
+                )
+            })
+            .collect(),
+    )
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+
+    /// A textured square (checkerboard of 2-pixel cells) on a flat grey background.
+    fn frame(w: usize, h: usize, cx: f64, cy: f64) -> Vec<u8> {
+        let mut rgb = vec![90u8; w * h * 3];
+        for y in 0..h {
+            for x in 0..w {
+                let (dx, dy) = (x as f64 - cx, y as f64 - cy);
+                if dx.abs() < 8.0 && dy.abs() < 8.0 {
+                    let on = ((dx + 8.0) as usize / 2 + (dy + 8.0) as usize / 2).is_multiple_of(2);
+                    let v = if on { 230 } else { 20 };
+                    rgb[(y * w + x) * 3..(y * w + x) * 3 + 3].fill(v);
+                }
+            }
+        }
+        rgb
+    }
+
+    #[test]
+    fn a_moving_textured_patch_is_followed_to_within_a_pixel() {
+        let (w, h) = (64, 48);
+        let path: Vec<(f64, f64)> = (0..20)
+            .map(|t| (16.0 + 1.5 * t as f64, 20.0 + 0.5 * t as f64))
+            .collect();
+        let frames: Vec<Vec<u8>> = path.iter().map(|&(x, y)| frame(w, h, x, y)).collect();
+        let track = hand_track(&frames, w, h).unwrap();
+        // The points sit somewhere on the patch: their offset from its centre is constant.
+        let off = (track[0].0 - path[0].0, track[0].1 - path[0].1);
+        for (got, want) in track.iter().zip(&path) {
+            assert!((got.0 - want.0 - off.0).abs() < 1.0, "{got:?} vs {want:?}");
+            assert!((got.1 - want.1 - off.1).abs() < 1.0, "{got:?} vs {want:?}");
+        }
+    }
+
+    #[test]
+    fn a_still_clip_has_no_track() {
+        let frames = vec![frame(32, 32, 16.0, 16.0); 5];
+        assert!(hand_track(&frames, 32, 32).is_none());
+    }
+}
