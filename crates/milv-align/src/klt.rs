@@ -21,8 +21,10 @@ const CORNER_QUALITY: f32 = 0.01;
 const MIN_DISTANCE: f64 = 2.0;
 /// Frame differences (RGB distance, 3×3 mean) above this count as motion for the mask.
 const MASK_MOTION: f32 = 12.0;
-/// The tracked points whose per-frame median makes the track.
+/// How many of the most travelled points are kept.
 pub const TOP_POINTS: usize = 3;
+/// ... if they travel at least this share of the farthest one's path.
+const MIN_TRAVEL_SHARE: f64 = 0.5;
 
 /// A grey image (luma in [0, 1]) with bilinear sampling, clamped at the border.
 #[derive(Clone)]
@@ -254,10 +256,10 @@ fn motion_mask(frames: &[Vec<u8>], w: usize, h: usize) -> Vec<bool> {
     grown
 }
 
-/// The track of a clip (RGB24 frames of `w`×`h`): per frame, the median position (pixels)
-/// of the [`TOP_POINTS`] points that travel farthest among those tracked through the whole
-/// clip; `None` when nothing moves or no point survives.
-pub fn hand_track(frames: &[Vec<u8>], w: usize, h: usize) -> Option<Vec<(f64, f64)>> {
+/// The tracks (pixel positions, one per frame) of the [`TOP_POINTS`] points that travel
+/// farthest among those tracked through the whole clip (RGB24 frames of `w`×`h`),
+/// farthest first; `None` when nothing moves or no point survives.
+pub fn hand_tracks(frames: &[Vec<u8>], w: usize, h: usize) -> Option<Vec<Vec<(f64, f64)>>> {
     let n = frames.len();
     if n < 2 {
         return None;
@@ -307,31 +309,14 @@ pub fn hand_track(frames: &[Vec<u8>], w: usize, h: usize) -> Option<Vec<(f64, f6
     let top: Vec<usize> = travelled
         .iter()
         .take(TOP_POINTS)
-        .filter(|t| t.0 > 0.0)
+        // Points that hardly move (background corners at the mask's edge) are no hand.
+        .filter(|t| t.0 > 0.0 && t.0 >= MIN_TRAVEL_SHARE * travelled[0].0)
         .map(|t| t.1)
         .collect();
     if top.is_empty() {
         return None;
     }
-    let median = |mut v: Vec<f64>| {
-        v.sort_by(f64::total_cmp);
-        let m = v.len() / 2;
-        if v.len() % 2 == 1 {
-            v[m]
-        } else {
-            0.5 * (v[m - 1] + v[m])
-        }
-    };
-    Some(
-        (0..n)
-            .map(|t| {
-                (
-                    median(top.iter().map(|&k| pts[k][t].0).collect()),
-                    median(top.iter().map(|&k| pts[k][t].1).collect()),
-                )
-            })
-            .collect(),
-    )
+    Some(top.into_iter().map(|k| std::mem::take(&mut pts[k])).collect())
 }
 
 #[cfg(test)]
@@ -359,21 +344,27 @@ mod tests {
     fn a_moving_textured_patch_is_followed_to_within_a_pixel() {
         let (w, h) = (64, 48);
         let path: Vec<(f64, f64)> = (0..20)
-            .map(|t| (16.0 + 1.5 * t as f64, 20.0 + 0.5 * t as f64))
+            .map(|t| (12.0 + 2.0 * t as f64, 12.0 + t as f64))
             .collect();
         let frames: Vec<Vec<u8>> = path.iter().map(|&(x, y)| frame(w, h, x, y)).collect();
-        let track = hand_track(&frames, w, h).unwrap();
-        // The points sit somewhere on the patch: their offset from its centre is constant.
-        let off = (track[0].0 - path[0].0, track[0].1 - path[0].1);
-        for (got, want) in track.iter().zip(&path) {
-            assert!((got.0 - want.0 - off.0).abs() < 1.0, "{got:?} vs {want:?}");
-            assert!((got.1 - want.1 - off.1).abs() < 1.0, "{got:?} vs {want:?}");
+        let tracks = hand_tracks(&frames, w, h).unwrap();
+        assert_eq!(tracks.len(), TOP_POINTS);
+        // The points sit on the patch: each one's offset from its centre stays within a
+        // pixel for most of the clip (a point at an edge may slide along it a little).
+        for track in tracks {
+            let off = (track[0].0 - path[0].0, track[0].1 - path[0].1);
+            let held = track
+                .iter()
+                .zip(&path)
+                .filter(|(got, want)| (got.0 - want.0 - off.0).hypot(got.1 - want.1 - off.1) < 1.0)
+                .count();
+            assert!(held >= 18, "{held} of 20 frames: {track:?}");
         }
     }
 
     #[test]
     fn a_still_clip_has_no_track() {
         let frames = vec![frame(32, 32, 16.0, 16.0); 5];
-        assert!(hand_track(&frames, 32, 32).is_none());
+        assert!(hand_tracks(&frames, 32, 32).is_none());
     }
 }

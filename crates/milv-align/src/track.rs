@@ -7,17 +7,22 @@
 //! the proportional warp). The robot's states give its end-effector path in 3-D; the
 //! human clip shows the same path through one unknown camera. So the robot path is
 //! mapped into the human image by the affine map that best fits the current alignment,
-//! the pair is re-aligned on image positions, and the two steps alternate
-//! (a resection inside DTW, in the spirit of canonical time warping).
+//! the pair is re-aligned on image positions, and the two steps alternate until the
+//! alignment stops changing (a resection inside DTW, in the spirit of canonical time
+//! warping).
 //!
-//! * human clip: [`crate::klt::hand_track`] (or, when no point survives, the tip from
-//!   frame differences of [`crate::motion::TipTracker`]), cleaned (5-frame median, Gaussian σ = 1.5
-//!   frames), centred and scaled; features `[progress, x, y]`.
+//! * human clip: the [`klt::TOP_POINTS`] most travelled points of [`klt::hand_tracks`]
+//!   (or, when no point survives, the tip from frame differences of
+//!   [`motion::TipTracker`]), each cleaned (5-frame median, Gaussian σ = 1.5 frames),
+//!   centred and scaled together; features `[progress, x₁, y₁, …, x_K, y_K]`, progress
+//!   along the path of the points' per-frame median.
 //! * robot clip: its state vectors (any width: 3-D end-effector positions, or milv-sim's
 //!   2-D table positions), centred and scaled.
-//! * [`FeatureKind::fit_pair`]: start from the alignment of progress alone, then
-//!   [`ROUNDS`] × (fit the affine map state → image on the alignment, project, re-align);
-//!   the robot's features become `[progress, x, y]` of its projected path.
+//! * [`FeatureKind::fit_pair`]: one affine map state → all K image points (each point is
+//!   its own view of the hand), alternated with re-alignment up to [`ROUNDS`] times, from
+//!   two starts (the alignment of progress alone, and the proportional warp); the start
+//!   whose fit leaves the smaller residual wins. The robot's features become
+//!   `[progress, points]` of its projected path.
 
 use crate::dtw::Features;
 use crate::features::{Aligner, Clip, FeatureKind};
@@ -25,11 +30,10 @@ use crate::{Error, klt, motion};
 
 pub struct Track;
 
-/// Alternations of fitting the camera and re-aligning.
-pub const ROUNDS: usize = 8;
-/// Weight of progress against the two position columns.
+/// Most alternations of fitting the camera and re-aligning (most pairs settle in < 10).
+pub const ROUNDS: usize = 20;
+/// Weight of progress against the position columns (which weigh as much as one point).
 pub const PROGRESS_WEIGHT: f64 = 1.0;
-const D: usize = 3;
 
 impl FeatureKind for Track {
     fn name(&self) -> &'static str {
@@ -50,77 +54,116 @@ impl FeatureKind for Track {
     }
 
     fn fit_pair(&self, human: &Features, robot: Features, align: &Aligner) -> Features {
-        if human.d != D || robot.n < 2 {
+        if human.d < 3 || human.d.is_multiple_of(2) || robot.n < 2 {
             return robot;
         }
-        let hxy: Vec<[f64; 2]> = (0..human.n).map(|i| [human.row(i)[1], human.row(i)[2]]).collect();
-        let hprog = Features::new(
-            human.n,
-            1,
-            (0..human.n).map(|i| human.row(i)[0] / PROGRESS_WEIGHT).collect(),
-        );
+        // The image points as `features_of` had them, before their weighting.
+        let scale = point_weight(human.d - 1);
+        let owned: Vec<Vec<f64>> = (0..human.n)
+            .map(|i| human.row(i)[1..].iter().map(|v| v / scale).collect())
+            .collect();
+        let points: Vec<&[f64]> = owned.iter().map(Vec::as_slice).collect();
+        let Ok(hprog) = Features::new(human.n, 1, (0..human.n).map(|i| human.row(i)[0]).collect()) else {
+            return robot;
+        };
+        let rows: Vec<Vec<f64>> = (0..robot.n).map(|j| robot.row(j).to_vec()).collect();
         let rprog = Features::new(
             robot.n,
             1,
-            progress(&(0..robot.n).map(|j| robot.row(j).to_vec()).collect::<Vec<_>>()),
+            progress(&rows).iter().map(|p| PROGRESS_WEIGHT * p).collect(),
         );
-        let (Ok(hprog), Ok(rprog)) = (hprog, rprog) else {
+        let starts = [
+            rprog.ok().and_then(|r| align(&hprog, &r)),
+            Some(crate::align::proportional_warp(human.n, robot.n)),
+        ];
+        let Some(fit) = starts
+            .into_iter()
+            .flatten()
+            .filter_map(|w| alternate(human, &points, &robot, w, align))
+            .min_by(|a, b| a.resid.total_cmp(&b.resid))
+        else {
             return robot;
         };
-        let Some(mut w) = align(&hprog, &rprog) else {
-            return robot;
-        };
-        let mut out = None;
-        for _ in 0..ROUNDS {
-            let Some(map) = fit_affine(&robot, &w, &hxy) else {
-                break;
-            };
-            let projected = project(&robot, &map);
-            let Ok(f) = features_of(&projected) else {
-                break;
-            };
-            let Some(next) = align(human, &f) else {
-                break;
-            };
-            out = Some(f);
-            if next == w {
-                break;
-            }
-            w = next;
-        }
-        out.unwrap_or(robot)
+        fit.features
     }
 }
 
-/// The human clip's tracked hand as `[progress, x, y]`.
+/// Where alternating fits settled.
+struct Fit {
+    features: Features,
+    /// Mean squared distance of the human points from the projected robot path on it.
+    resid: f64,
+}
+
+/// Fits the camera on alignment `w` and re-aligns, until `w` settles or [`ROUNDS`].
+fn alternate(
+    human: &Features,
+    points: &[&[f64]],
+    robot: &Features,
+    mut w: Vec<usize>,
+    align: &Aligner,
+) -> Option<Fit> {
+    let mut out = None;
+    for _ in 0..ROUNDS {
+        let cams = fit_camera(robot, &w, points)?;
+        let projected = project(robot, &cams);
+        let features = features_of(&projected).ok()?;
+        let next = align(human, &features)?;
+        let resid = next
+            .iter()
+            .zip(points)
+            .map(|(&j, p)| {
+                p.iter()
+                    .zip(&projected[j])
+                    .map(|(a, b)| (a - b).powi(2))
+                    .sum::<f64>()
+            })
+            .sum::<f64>()
+            / points.len() as f64;
+        out = Some(Fit { features, resid });
+        if next == w {
+            break;
+        }
+        w = next;
+    }
+    out
+}
+
+/// The human clip's tracked points as `[progress, x₁, y₁, …]`.
 fn human_features(clip: &Clip) -> Result<Features, Error> {
     let (frames, w, h) = clip.all_rgb()?;
     let n = frames.len();
     // Untextured, flat-shaded arms (milv-sim's) give the point tracker nothing to hold:
     // then the tip found from frame differences stands in, in image coordinates.
-    let track = match klt::hand_track(&frames, w, h) {
+    let tracks = match klt::hand_tracks(&frames, w, h) {
         Some(t) => t,
         None => {
             let mut tips = motion::TipTracker::new(w, h, n);
             for f in frames {
                 tips.push(f);
             }
-            tips.finish()
-                .ok_or_else(|| {
-                    Error::Invalid(format!(
-                        "episode {}: nothing moves in the clip (track features need a moving arm)",
-                        clip.episode_id
-                    ))
-                })?
-                .tips
+            let tip = tips.finish().ok_or_else(|| {
+                Error::Invalid(format!(
+                    "episode {}: nothing moves in the clip (track features need a moving arm)",
+                    clip.episode_id
+                ))
+            })?;
+            vec![tip.tips]
         }
     };
-    let clean = |c: fn(&(f64, f64)) -> f64| {
-        let v: Vec<f64> = track.iter().map(c).collect();
-        motion::gaussian_filter(&motion::median_filter(&v, 5), 1.5)
-    };
-    let (xs, ys) = (clean(|p| p.0), clean(|p| p.1));
-    let rows: Vec<Vec<f64>> = xs.iter().zip(&ys).map(|(&x, &y)| vec![x, y]).collect();
+    let clean = |v: Vec<f64>| motion::gaussian_filter(&motion::median_filter(&v, 5), 1.5);
+    let cleaned: Vec<(Vec<f64>, Vec<f64>)> = tracks
+        .iter()
+        .map(|t| {
+            (
+                clean(t.iter().map(|p| p.0).collect()),
+                clean(t.iter().map(|p| p.1).collect()),
+            )
+        })
+        .collect();
+    let rows: Vec<Vec<f64>> = (0..n)
+        .map(|t| cleaned.iter().flat_map(|(x, y)| [x[t], y[t]]).collect())
+        .collect();
     features_of(&standardized(&rows))
 }
 
@@ -173,39 +216,84 @@ fn progress(rows: &[Vec<f64>]) -> Vec<f64> {
     }
 }
 
-/// `[PROGRESS_WEIGHT · progress, x, y]` of an image path.
-fn features_of(xy: &[Vec<f64>]) -> Result<Features, Error> {
-    let p = progress(xy);
-    let data = xy
-        .iter()
-        .zip(&p)
-        .flat_map(|(r, &p)| [PROGRESS_WEIGHT * p, r[0], r[1]])
-        .collect();
-    Features::new(xy.len(), D, data)
+/// Weight of each of `q` point coordinates (K = q / 2 points weigh as much as one).
+fn point_weight(q: usize) -> f64 {
+    (2.0 / q.max(2) as f64).sqrt()
 }
 
-/// Least-squares affine map (a `(d + 1) × 2` matrix, last row the offset) taking robot
-/// state `w[i]` to human image point `i`; `None` when the states are degenerate.
-fn fit_affine(robot: &Features, w: &[usize], hxy: &[[f64; 2]]) -> Option<Vec<[f64; 2]>> {
-    let k = robot.d + 1;
-    // Normal equations, with a whisker of ridge so a flat state column does not stop it.
-    let mut a = vec![vec![0.0; k + 2]; k];
-    for (i, &j) in w.iter().enumerate() {
-        let x: Vec<f64> = robot.row(j).iter().copied().chain([1.0]).collect();
-        for r in 0..k {
-            for c in 0..k {
-                a[r][c] += x[r] * x[c];
-            }
-            a[r][k] += x[r] * hxy[i][0];
-            a[r][k + 1] += x[r] * hxy[i][1];
+/// `[PROGRESS_WEIGHT · progress, points / √K]` of K image points per frame (rows of
+/// `x₁, y₁, …`): progress along the path of their per-frame median; the points weigh
+/// together as much as one.
+fn features_of(rows: &[Vec<f64>]) -> Result<Features, Error> {
+    let q = rows.first().map_or(0, Vec::len);
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let m = v.len() / 2;
+        if v.len() % 2 == 1 {
+            v[m]
+        } else {
+            0.5 * (v[m - 1] + v[m])
         }
-    }
-    for (r, row) in a.iter_mut().enumerate() {
-        row[r] += 1e-6;
-    }
-    // Gauss–Jordan with partial pivoting on the two right-hand sides at once.
-    for c in 0..k {
-        let p = (c..k).max_by(|&x, &y| a[x][c].abs().total_cmp(&a[y][c].abs()))?;
+    };
+    let centre: Vec<Vec<f64>> = rows
+        .iter()
+        .map(|r| {
+            vec![
+                median(r.iter().step_by(2).copied().collect()),
+                median(r.iter().skip(1).step_by(2).copied().collect()),
+            ]
+        })
+        .collect();
+    let p = progress(&centre);
+    let scale = point_weight(q);
+    let data = rows
+        .iter()
+        .zip(&p)
+        .flat_map(|(r, &p)| std::iter::once(PROGRESS_WEIGHT * p).chain(r.iter().map(|v| scale * v)))
+        .collect();
+    Features::new(rows.len(), q + 1, data)
+}
+
+/// Per image point (a pair of columns of `points`), the affine camera `[a (d), a₀, b (d),
+/// b₀]` fitted by least squares on alignment `w`: `x = a·s + a₀`, `y = b·s + b₀` for robot
+/// state `s`. `None` when the states are degenerate. (A projective camera, linearised as
+/// in the DLT, measured worse on the MuJoCo set and no better on milv-sim: BENCHMARKS.md.)
+fn fit_camera(robot: &Features, w: &[usize], points: &[&[f64]]) -> Option<Vec<Vec<f64>>> {
+    let d = robot.d;
+    let m = 2 * d + 2;
+    (0..points.first()?.len() / 2)
+        .map(|k| {
+            // Normal equations [AᵀA | Aᵀb], with a whisker of ridge so a flat state column
+            // does not stop it.
+            let mut a = vec![vec![0.0; m + 1]; m];
+            for (&j, p) in w.iter().zip(points) {
+                let s = robot.row(j);
+                for (axis, target) in [p[2 * k], p[2 * k + 1]].into_iter().enumerate() {
+                    let mut row = vec![0.0; m];
+                    let off = axis * (d + 1);
+                    row[off..off + d].copy_from_slice(s);
+                    row[off + d] = 1.0;
+                    for r in 0..m {
+                        for c in 0..m {
+                            a[r][c] += row[r] * row[c];
+                        }
+                        a[r][m] += row[r] * target;
+                    }
+                }
+            }
+            for (r, row) in a.iter_mut().enumerate() {
+                row[r] += 1e-6;
+            }
+            solve(a)
+        })
+        .collect()
+}
+
+/// Solves the square system of augmented matrix `a` (Gauss–Jordan, partial pivoting).
+fn solve(mut a: Vec<Vec<f64>>) -> Option<Vec<f64>> {
+    let m = a.len();
+    for c in 0..m {
+        let p = (c..m).max_by(|&x, &y| a[x][c].abs().total_cmp(&a[y][c].abs()))?;
         if a[p][c].abs() < 1e-12 {
             return None;
         }
@@ -220,20 +308,23 @@ fn fit_affine(robot: &Features, w: &[usize], hxy: &[[f64; 2]]) -> Option<Vec<[f6
             }
         }
     }
-    Some(
-        (0..k)
-            .map(|r| [a[r][k] / a[r][r], a[r][k + 1] / a[r][r]])
-            .collect(),
-    )
+    Some((0..m).map(|r| a[r][m] / a[r][r]).collect())
 }
 
-fn project(robot: &Features, map: &[[f64; 2]]) -> Vec<Vec<f64>> {
+/// The robot's path through the fitted cameras.
+fn project(robot: &Features, cams: &[Vec<f64>]) -> Vec<Vec<f64>> {
     let d = robot.d;
+    let dot = |a: &[f64], s: &[f64]| a.iter().zip(s).map(|(x, y)| x * y).sum::<f64>();
     (0..robot.n)
         .map(|j| {
             let s = robot.row(j);
-            (0..2)
-                .map(|o| s.iter().zip(map).map(|(v, m)| v * m[o]).sum::<f64>() + map[d][o])
+            cams.iter()
+                .flat_map(|c| {
+                    [
+                        dot(&c[..d], s) + c[d],
+                        dot(&c[d + 1..2 * d + 1], s) + c[2 * d + 1],
+                    ]
+                })
                 .collect()
         })
         .collect()
@@ -279,26 +370,30 @@ mod tests {
             })
             .collect();
         let truth: Vec<f64> = (0..45).map(|i| warp(i) * 59.0).collect();
+        let mean_error = |got: &[usize]| -> f64 {
+            got.iter()
+                .zip(&truth)
+                .map(|(&g, t)| (g as f64 - t).abs())
+                .sum::<f64>()
+                / 45.0
+        };
         let hf = features_of(&standardized(&human)).unwrap();
-        let rs = standardized(&robot);
-        let rf = Features::new(60, 3, rs.concat()).unwrap();
+        let rf = Features::new(60, 3, standardized(&robot).concat()).unwrap();
+        // The floor: the camera fitted on the true correspondences.
+        let true_w: Vec<usize> = truth.iter().map(|t| t.round() as usize).collect();
+        let owned: Vec<Vec<f64>> = (0..45).map(|i| hf.row(i)[1..].to_vec()).collect();
+        let points: Vec<&[f64]> = owned.iter().map(Vec::as_slice).collect();
+        let cams = fit_camera(&rf, &true_w, &points).unwrap();
+        let best = features_of(&project(&rf, &cams)).unwrap();
+        let floor = mean_error(&aligner(&hf, &best).unwrap());
+        // Alternating fits from scratch settle near, not at, that camera.
         let fitted = Track.fit_pair(&hf, rf, &aligner);
-        assert_eq!(fitted.d, D);
-        let got = aligner(&hf, &fitted).unwrap();
-        let err: f64 = got
-            .iter()
-            .zip(&truth)
-            .map(|(&g, t)| (g as f64 - t).abs())
-            .sum::<f64>()
-            / 45.0;
-        let prop: f64 = crate::align::proportional_warp(45, 60)
-            .iter()
-            .zip(&truth)
-            .map(|(&g, t)| (g as f64 - t).abs())
-            .sum::<f64>()
-            / 45.0;
+        assert_eq!(fitted.d, 3);
+        let err = mean_error(&aligner(&hf, &fitted).unwrap());
+        let prop = mean_error(&crate::align::proportional_warp(45, 60));
+        assert!(floor < 0.6, "floor {floor}");
         assert!(
-            err < 1.5 && err < 0.25 * prop,
+            err < 2.0 && err < 0.3 * prop,
             "error {err} vs proportional {prop}"
         );
     }

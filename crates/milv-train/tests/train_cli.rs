@@ -201,3 +201,31 @@ fn corrupt_checkpoints_and_missing_random_videos_are_clear_errors() {
     assert_eq!(code, 1);
     assert!(err.contains("checkpoint.json"), "{err}");
 }
+
+/// π_I predicts as many values as the robot's actions have (3 here, where milv-sim has
+/// Δx, Δy); robot videos that disagree are refused by name.
+#[test]
+fn the_action_width_comes_from_the_robot_videos() {
+    let dir = tempfile::tempdir().unwrap();
+    let fx = common::sim_dataset_with_actions(dir.path(), 2, true, &|_| 1);
+    let runs = dir.path().join("run");
+    let mut args = vec!["cyclegan", s(&fx.root), "--out", s(&runs), "--steps", "2"];
+    args.extend(TINY);
+    assert_eq!(json(&args)["step"], 2);
+    let meta: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(runs.join("checkpoints/step-00000002/checkpoint.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(meta["model"]["action_dim"], 3);
+
+    let dir = tempfile::tempdir().unwrap();
+    let fx = common::sim_dataset_with_actions(dir.path(), 2, true, &|name| {
+        usize::from(name == "robot_random_1_train")
+    });
+    let runs = dir.path().join("run");
+    let mut args = vec!["cyclegan", s(&fx.root), "--out", s(&runs), "--steps", "2"];
+    args.extend(TINY);
+    let (code, _, err) = run(&args);
+    assert_ne!(code, 0);
+    assert!(err.contains("action values where the others have"), "{err}");
+}

@@ -17,7 +17,7 @@ pub struct ModelConfig {
     pub idm_filters: i64,
     /// Units of each inverse-dynamics hidden layer.
     pub idm_hidden: i64,
-    /// Action width (Δx, Δy).
+    /// Action width: Δx, Δy on milv-sim; a new run takes it from its robot videos.
     pub action_dim: i64,
     /// Negative slope of π_I's conv activations: 0 is a ReLU (the paper's, and every
     /// checkpoint written before this field). A leaky one keeps a gradient when every

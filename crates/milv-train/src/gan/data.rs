@@ -50,6 +50,8 @@ pub struct TrainingSet {
     pub alignment: Option<AlignmentRun>,
     /// sha256 over the files read and the selection: a resumed run checks it.
     pub digest: String,
+    /// Values per action of the robot videos (what π_I predicts).
+    pub action_dim: usize,
 }
 
 /// What [`TrainingSet::load`] needs to know.
@@ -87,6 +89,16 @@ impl TrainingSet {
             return Err(Error::Data(format!(
                 "robot random episode {} ({}) has no actions: the inverse-dynamics model needs them",
                 e.episode_id, e.source_uri
+            )));
+        }
+        // π_I has one output per action value, so every robot video must agree on them.
+        let action_dim = robots.values().next().and_then(|e| e.action_dim).unwrap_or(0) as usize;
+        if let Some(e) = robots.values().find(|e| e.action_dim != Some(action_dim as i32)) {
+            return Err(Error::Data(format!(
+                "robot random episode {} ({}) has {} action values where the others have {action_dim}",
+                e.episode_id,
+                e.source_uri,
+                e.action_dim.unwrap_or(0)
             )));
         }
         let (alignment, pairs) = if opts.no_alignments {
@@ -138,6 +150,7 @@ impl TrainingSet {
             pairs,
             alignment,
             digest,
+            action_dim,
         })
     }
 

@@ -51,20 +51,27 @@ fn episode(
     split: Split,
     r: &Rollout,
     pair: Option<&str>,
+    extra_actions: usize,
 ) -> (Episode, Vec<Frame>) {
     let e = Episode {
         kind,
         split,
         task_id: Some("draw/x".into()),
         pair_id: pair.map(String::from),
-        action_dim: Some(2),
+        action_dim: Some(2 + extra_actions as i32),
         state_dim: Some(2),
         ..milv_fixtures::episode(name, domain, r.frames.len(), (SIZE, SIZE))
     };
     let frames = (0..r.frames.len())
         .map(|i| Frame {
             image: milv_fixtures::png(&r.frames[i], SIZE, SIZE),
-            action: Some(r.actions[i].to_vec()),
+            action: Some(
+                r.actions[i]
+                    .iter()
+                    .copied()
+                    .chain(std::iter::repeat_n(0.0, extra_actions))
+                    .collect(),
+            ),
             state: Some(r.states[i].to_vec()),
         })
         .collect();
@@ -83,6 +90,17 @@ pub struct Fixture {
 /// loosely paired clip; then the `alignments` of the pairs. `with_random: false` leaves
 /// out the robot random videos.
 pub fn sim_dataset(dir: &Path, tasks: usize, with_random: bool) -> Fixture {
+    sim_dataset_with_actions(dir, tasks, with_random, &|_| 0)
+}
+
+/// [`sim_dataset`] with `extra_actions(name)` zero action values appended to the
+/// episode called `name` (robots with wider actions than milv-sim's Δx, Δy).
+pub fn sim_dataset_with_actions(
+    dir: &Path,
+    tasks: usize,
+    with_random: bool,
+    extra_actions: &dyn Fn(&str) -> usize,
+) -> Fixture {
     let root = dir.join("ds");
     let ds = Dataset::open_or_create(&root, meta()).unwrap();
     let mut eps = Vec::new();
@@ -99,8 +117,24 @@ pub fn sim_dataset(dir: &Path, tasks: usize, with_random: bool) -> Fixture {
         let r = rollout(sim(SimDomain::Robot), expert_action);
         human_frames += h.frames.len();
         let (hn, rn) = (format!("human_demo_{i}"), format!("robot_demo_{i}"));
-        eps.push(episode(&hn, Domain::Human, Kind::Demo, Split::Train, &h, None));
-        eps.push(episode(&rn, Domain::Robot, Kind::Demo, Split::Train, &r, None));
+        eps.push(episode(
+            &hn,
+            Domain::Human,
+            Kind::Demo,
+            Split::Train,
+            &h,
+            None,
+            extra_actions(&hn),
+        ));
+        eps.push(episode(
+            &rn,
+            Domain::Robot,
+            Kind::Demo,
+            Split::Train,
+            &r,
+            None,
+            extra_actions(&rn),
+        ));
         truth += &format!("{{\"human\":\"{hn}.mp4\",\"robot\":\"{rn}.mp4\"}}\n");
         if with_random {
             for split in [Split::Train, Split::Test]
@@ -110,7 +144,15 @@ pub fn sim_dataset(dir: &Path, tasks: usize, with_random: bool) -> Fixture {
                 let mut policy = SmoothRandom::new(100 + i as u64);
                 let rr = rollout(sim(SimDomain::Robot), |s| policy.act(s));
                 let name = format!("robot_random_{i}_{split}");
-                eps.push(episode(&name, Domain::Robot, Kind::Random, split, &rr, None));
+                eps.push(episode(
+                    &name,
+                    Domain::Robot,
+                    Kind::Random,
+                    split,
+                    &rr,
+                    None,
+                    extra_actions(&name),
+                ));
             }
         }
         let pair = paired_clips(&task, SIZE, 20, 16, &mut rng).unwrap();
@@ -124,6 +166,7 @@ pub fn sim_dataset(dir: &Path, tasks: usize, with_random: bool) -> Fixture {
             Split::Train,
             &pair.human,
             Some(&pid),
+            extra_actions(&hp),
         ));
         let rp = format!("robot_paired_{i}");
         eps.push(episode(
@@ -133,6 +176,7 @@ pub fn sim_dataset(dir: &Path, tasks: usize, with_random: bool) -> Fixture {
             Split::Train,
             &pair.robot,
             Some(&pid),
+            extra_actions(&rp),
         ));
     }
     commit_episodes(&ds, &eps, meta()).unwrap();

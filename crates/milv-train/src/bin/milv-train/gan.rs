@@ -212,16 +212,40 @@ pub(crate) fn cmd_train_cyclegan(a: TrainArgs) -> anyhow::Result<u8> {
         |d| Ok(checkpoint::read_meta(d)?.data),
     )?;
     let version = start.version;
-    let mut run = match &start.checkpoint {
+    let resumed = match &start.checkpoint {
         Some(dir) => {
             let (mut run, _) = checkpoint::load(dir, dev)?;
             run.train.steps = a.steps;
             eprintln!("milv-train: resuming {} at step {}", dir.display(), run.step);
+            Some(run)
+        }
+        None => None,
+    };
+    let lambda_aux = resumed.as_ref().map_or(a.lambda_aux, |r| r.train.lambda_aux);
+    let set = TrainingSet::load(
+        &ds,
+        version,
+        &DataOptions {
+            alignment: a.alignment.clone(),
+            no_alignments: lambda_aux == 0.0,
+        },
+    )?;
+    let mut run = match resumed {
+        Some(run) => {
+            if run.model.action_dim != set.action_dim as i64 {
+                anyhow::bail!(
+                    "{}: the checkpoint's π_I predicts {} action values, the robot videos of version {version} have {}",
+                    ckpts.display(),
+                    run.model.action_dim,
+                    set.action_dim
+                );
+            }
             run
         }
         None => {
             let model = ModelConfig {
                 idm_slope: a.idm_slope,
+                action_dim: set.action_dim as i64,
                 ..model_config(a.tiny, a.size)
             };
             let train_cfg = TrainConfig {
@@ -242,14 +266,6 @@ pub(crate) fn cmd_train_cyclegan(a: TrainArgs) -> anyhow::Result<u8> {
             ACycleGan::new(model, train_cfg, dev)?
         }
     };
-    let set = TrainingSet::load(
-        &ds,
-        version,
-        &DataOptions {
-            alignment: a.alignment.clone(),
-            no_alignments: run.train.lambda_aux == 0.0,
-        },
-    )?;
     start.check_digest(&set.digest)?;
     let data = DataRef {
         uri: ds.root().display().to_string(),
