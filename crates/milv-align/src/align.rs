@@ -187,13 +187,14 @@ fn banded_dtw(a: &crate::Features, b: &crate::Features, opts: &AlignOptions) -> 
     dtw(a, b, &band, opts.step, true)
 }
 
-/// Aligns one pair's clips.
+/// Aligns one pair's clips: the alignment, both clips' features (the robot's fitted to
+/// the human's) and the share of path cells on the band's edge.
 fn align_pair(
     kind: &dyn FeatureKind,
     human: &Clip,
     robot: &Clip,
     opts: &AlignOptions,
-) -> std::result::Result<(Alignment, usize, f64), String> {
+) -> std::result::Result<(Alignment, crate::Features, crate::Features, f64), String> {
     for c in [human, robot] {
         if c.images.len() < 2 {
             return Err(format!(
@@ -226,7 +227,7 @@ fn align_pair(
         })
         .count() as f64
         / al.path.len() as f64;
-    Ok((al, h.d, edge))
+    Ok((al, h, r, edge))
 }
 
 /// Loads and aligns one pair (for `milv-align show`): the clips' features and alignment.
@@ -256,12 +257,8 @@ pub fn load_pair(
         rc.get(&r.episode_id)
             .ok_or_else(|| Error::Invalid(format!("episode {} has no frames", r.episode_id)))?,
     );
-    let (al, _, _) =
+    let (al, hf, rf, _) =
         align_pair(kind, hc, rc, opts).map_err(|m| Error::Invalid(format!("pair {pair_id}: {m}")))?;
-    let hf = kind.extract(hc)?;
-    let rf = kind.fit_pair(&hf, kind.extract(rc)?, &|a, b| {
-        banded_dtw(a, b, opts).ok().map(|al| row_to_col(&al.path, a.n))
-    });
     Ok((hf, rf, al))
 }
 
@@ -364,8 +361,8 @@ pub fn align_dataset(
                 let rc = rclips
                     .get(&r.episode_id)
                     .ok_or_else(|| format!("robot episode {} has no frames", r.episode_id))?;
-                let (al, d, edge) = align_pair(kind, hc, rc, opts)?;
-                let per_dim = al.normalized / d.max(1) as f64;
+                let (al, hf, _, edge) = align_pair(kind, hc, rc, opts)?;
+                let per_dim = al.normalized / hf.d.max(1) as f64;
                 let ((mean_err, max_err), (prop_mean, prop_max)) = match opts.truth.get(*p) {
                     Some(t) if t.len() == hc.images.len() => {
                         let got = row_to_col(&al.path, hc.images.len());
@@ -426,17 +423,9 @@ pub fn align_dataset(
         pairs: aligned.iter().map(|(s, _)| s.clone()).collect(),
         failed,
         rows: aligned.iter().map(|(_, a)| a.path.len() as u64).sum(),
-        mean_frame_error: (!with_truth.is_empty()).then(|| {
-            with_truth.iter().filter_map(|s| s.mean_frame_error).sum::<f64>() / with_truth.len() as f64
-        }),
+        mean_frame_error: mean_over(&with_truth, |s| s.mean_frame_error),
         max_frame_error: with_truth.iter().filter_map(|s| s.max_frame_error).max(),
-        proportional_mean_error: (!with_truth.is_empty()).then(|| {
-            with_truth
-                .iter()
-                .filter_map(|s| s.proportional_mean_error)
-                .sum::<f64>()
-                / with_truth.len() as f64
-        }),
+        proportional_mean_error: mean_over(&with_truth, |s| s.proportional_mean_error),
         trusted_worse_than_proportional: with_truth
             .iter()
             .filter(|s| s.trusted && s.mean_frame_error > s.proportional_mean_error)
@@ -478,6 +467,11 @@ pub fn proportional_warp(n: usize, m: usize) -> Vec<usize> {
             }
         })
         .collect()
+}
+
+/// Mean of one per-pair error over the pairs with ground truth; `None` without any.
+fn mean_over(pairs: &[&PairSummary], err: fn(&PairSummary) -> Option<f64>) -> Option<f64> {
+    (!pairs.is_empty()).then(|| pairs.iter().filter_map(|s| err(s)).sum::<f64>() / pairs.len() as f64)
 }
 
 /// Mean and max |got − truth| over the frames.

@@ -183,11 +183,10 @@ fn lk(a: &Pyramid, b: &Pyramid, p: (f64, f64)) -> Option<(f64, f64)> {
     Some((p.0 + g.0, p.1 + g.1))
 }
 
-/// Shi–Tomasi corners of `img` inside `mask`, strongest first, at least
-/// [`MIN_DISTANCE`] apart.
-fn corners(img: &Gray, mask: &[bool]) -> Vec<(f64, f64)> {
-    let (w, h) = (img.w, img.h);
-    let (gx, gy) = img.gradients();
+/// Shi–Tomasi corners of an image (given by its gradients, as its pyramid has them)
+/// inside `mask`, strongest first, at least [`MIN_DISTANCE`] apart.
+fn corners(gx: &Gray, gy: &Gray, mask: &[bool]) -> Vec<(f64, f64)> {
+    let (w, h) = (gx.w, gx.h);
     let mut eig = vec![0.0f32; w * h];
     for y in 1..h.saturating_sub(1) {
         for x in 1..w.saturating_sub(1) {
@@ -269,7 +268,8 @@ pub fn hand_tracks(frames: &[Vec<u8>], w: usize, h: usize) -> Option<Vec<Vec<(f6
         .iter()
         .map(|f| Pyramid::new(Gray::from_rgb(f, w, h)))
         .collect();
-    let start = corners(&pyr[0].levels[0].0, &mask);
+    let (_, gx, gy) = &pyr[0].levels[0];
+    let start = corners(gx, gy, &mask);
     let mut pts: Vec<Vec<(f64, f64)>> = start.iter().map(|&p| vec![p]).collect();
     let mut alive = vec![true; start.len()];
     for t in 1..n {
