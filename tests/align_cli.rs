@@ -42,17 +42,15 @@ fn simulated_pairs_align_within_the_goals() {
         let truth = sim.join("warps.jsonl");
         let pairs: Vec<String> = (0..8).map(|k| format!("{task}-{seed}-{k:04}")).collect();
         let pairs = pairs.join(",");
-        for (features, goal) in [("state", 1.0), ("motion", 2.0)] {
-            let (code, rep, err) = align_json(&[
-                ds_s,
-                "--features",
-                features,
-                "--pairs",
-                &pairs,
-                "--truth",
-                path_str(&truth),
-            ]);
+        // `auto` is the default: run it without naming features.
+        for (features, goal) in [("state", 1.0), ("motion", 2.0), ("auto", 2.0)] {
+            let mut args = vec![ds_s, "--pairs", &pairs, "--truth", path_str(&truth)];
+            if features != "auto" {
+                args.extend(["--features", features]);
+            }
+            let (code, rep, err) = align_json(&args);
             assert_eq!(code, 0, "{err}");
+            assert_eq!(rep["features"], features);
             let pairs = rep["pairs"].as_array().unwrap();
             assert_eq!(pairs.len(), 8);
             let mean = rep["mean_frame_error"].as_f64().unwrap();
@@ -61,6 +59,13 @@ fn simulated_pairs_align_within_the_goals() {
                 "{task} {features}: mean frame error {mean} > {goal}"
             );
             for p in pairs {
+                let kind = p["features"].as_str().unwrap();
+                let allowed: &[&str] = if features == "auto" {
+                    &["motion", "track"]
+                } else {
+                    &[features]
+                };
+                assert!(allowed.contains(&kind), "{task} {features}: {p}");
                 // Paths run from (0, 0) to the last frames, one row per aligned cell.
                 assert!(p["path_length"].as_u64().unwrap() >= p["human_frames"].as_u64().unwrap());
                 assert!(p["trusted"].as_bool().unwrap(), "{task} {features}: {p}");

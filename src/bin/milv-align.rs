@@ -16,7 +16,7 @@ use milv::data::{CommitMeta, Dataset, DatasetRef, Partition};
 /// new version. Prints a per-pair summary: normalised cost, path length, and a trust flag
 /// for pairs whose cost is high or whose path runs along the band's edge.
 ///
-///   milv-align DATASET[@V] --features motion|track|state|translated [--band F] [--jobs N]
+///   milv-align DATASET[@V] --features auto|motion|track|state|translated [--band F] [--jobs N]
 ///   milv-align show DATASET[@V] PAIR -o cost.png
 #[derive(Parser, Debug)]
 #[command(version, args_conflicts_with_subcommands = true)]
@@ -53,6 +53,9 @@ struct RunArgs {
 
 #[derive(clap::Args, Debug, Clone)]
 struct Common {
+    /// auto (default): motion for each pair whose motion cost says the table-plane model
+    /// fits (milv-sim-like scenes), else track (robot clips with states), unless only
+    /// motion's alignment is trusted; the report names the kind used per pair;
     /// motion: progress and heading of the arm's tip, tracked from frame differences and
     /// mapped onto the table plane (any clip); track: the human's hand followed by image
     /// feature points, against the robot's end-effector states mapped into the human's
@@ -60,7 +63,7 @@ struct Common {
     /// assumption); state: the episodes' state vectors (e.g.
     /// end-effector position); translated: the human clip translated to the robot domain
     /// (imagined table) against the robot frames.
-    #[arg(long, default_value = "motion")]
+    #[arg(long, default_value = "auto")]
     features: String,
     /// Band half-width as a fraction of the longer clip.
     #[arg(long, default_value_t = 0.2)]
@@ -72,7 +75,8 @@ struct Common {
     #[arg(long)]
     model_id: Option<String>,
     /// Pairs above this normalised cost per feature dimension are flagged untrusted
-    /// (default per feature kind: motion 0.002, track 0.01, state 0.002, translated 0.5).
+    /// (default per feature kind: motion 0.002, track 0.01, state 0.002, translated 0.5;
+    /// auto: that of the kind it picked for the pair).
     #[arg(long)]
     max_cost: Option<f64>,
 }
@@ -186,15 +190,16 @@ fn run_align(a: RunArgs) -> anyhow::Result<u8> {
         );
         let num = |e: Option<f64>| e.map_or("-".into(), |e| format!("{e:.2}"));
         println!(
-            "{:<28} {:>6} {:>6} {:>10} {:>6} {:>7} {:>9} {:>9}",
-            "pair", "human", "robot", "cost/dim", "path", "trusted", "err mean", "prop mean"
+            "{:<28} {:>6} {:>6} {:>8} {:>10} {:>6} {:>7} {:>9} {:>9}",
+            "pair", "human", "robot", "features", "cost/dim", "path", "trusted", "err mean", "prop mean"
         );
         for p in &rep.pairs {
             println!(
-                "{:<28} {:>6} {:>6} {:>10.4} {:>6} {:>7} {:>9} {:>9}",
+                "{:<28} {:>6} {:>6} {:>8} {:>10.4} {:>6} {:>7} {:>9} {:>9}",
                 p.pair_id,
                 p.human_frames,
                 p.robot_frames,
+                p.features,
                 p.cost_per_dim,
                 p.path_length,
                 if p.trusted { "yes" } else { "NO" },
@@ -292,7 +297,8 @@ fn run(args: Args) -> anyhow::Result<u8> {
         }) => {
             let ds = Dataset::open(&dataset.root).with_context(|| format!("opening {dataset}"))?;
             let kind = features::by_name(&common.features)?;
-            let (h, r, al) = load_pair(&ds, dataset.version, &pair, kind, &options(&common))?;
+            let fit = load_pair(&ds, dataset.version, &pair, kind, &options(&common))?;
+            let (h, r, al) = (&fit.human, &fit.robot, &fit.alignment);
             let cost: Vec<f64> = (0..h.n)
                 .flat_map(|i| (0..r.n).map(move |j| (i, j)))
                 .map(|(i, j)| milv::align::dtw::sq_dist(h.row(i), r.row(j)))
@@ -304,7 +310,11 @@ fn run(args: Args) -> anyhow::Result<u8> {
                 r.n,
                 &format!(
                     "pair {pair}: {} cost, normalised {:.4}",
-                    kind.name(),
+                    if fit.kind == kind.name() {
+                        fit.kind.to_string()
+                    } else {
+                        format!("{} → {}", kind.name(), fit.kind)
+                    },
                     al.normalized
                 ),
                 "robot frame",

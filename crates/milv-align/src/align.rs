@@ -51,6 +51,8 @@ pub struct PairSummary {
     pub robot_episode_id: String,
     pub human_frames: usize,
     pub robot_frames: usize,
+    /// The kind of features that aligned the pair (for `auto`, the one it picked).
+    pub features: String,
     /// Accumulated cost over the step pattern's normaliser.
     pub normalized_cost: f64,
     /// `normalized_cost` per feature dimension (comparable across feature kinds).
@@ -187,14 +189,67 @@ fn banded_dtw(a: &crate::Features, b: &crate::Features, opts: &AlignOptions) -> 
     dtw(a, b, &band, opts.step, true)
 }
 
-/// Aligns one pair's clips: the alignment, both clips' features (the robot's fitted to
-/// the human's) and the share of path cells on the band's edge.
+/// One pair aligned: the alignment, both clips' features (the robot's fitted to the
+/// human's), the share of path cells on the band's edge, and the kind that aligned it.
+pub struct PairFit {
+    pub alignment: Alignment,
+    pub human: crate::Features,
+    pub robot: crate::Features,
+    pub band_edge: f64,
+    pub kind: &'static str,
+    /// That kind's [`FeatureKind::untrusted_cost`].
+    pub untrusted_cost: f64,
+}
+
+impl PairFit {
+    /// Normalised cost per feature dimension (comparable across feature kinds).
+    pub fn cost_per_dim(&self) -> f64 {
+        self.alignment.normalized / self.human.d.max(1) as f64
+    }
+
+    /// Whether the alignment can be trusted: its cost within `max_cost` (default: its
+    /// kind's) and its path off the band's edge (a path along the edge was cut short).
+    pub fn trusted(&self, max_cost: Option<f64>) -> bool {
+        self.cost_per_dim() <= max_cost.unwrap_or(self.untrusted_cost) && self.band_edge <= 0.1
+    }
+}
+
+/// Aligns one pair's clips with `kind`, or, for a kind that picks per pair
+/// ([`FeatureKind::cascade`]), with the first of its kinds whose alignment is trusted and
+/// whose cost stays within its bound; when none does, the first whose alignment is
+/// trusted, else the last that aligned the pair at all (so a pair is not flagged for the
+/// sake of a kind that explains it worse).
 fn align_pair(
     kind: &dyn FeatureKind,
     human: &Clip,
     robot: &Clip,
     opts: &AlignOptions,
-) -> std::result::Result<(Alignment, crate::Features, crate::Features, f64), String> {
+) -> std::result::Result<PairFit, String> {
+    let cascade = kind.cascade();
+    if cascade.is_empty() {
+        return align_with(kind, human, robot, opts);
+    }
+    let (mut fits, mut errors) = (Vec::new(), Vec::new());
+    for &(k, keep_below) in cascade {
+        match align_with(k, human, robot, opts) {
+            Ok(fit) if fit.cost_per_dim() <= keep_below && fit.trusted(opts.max_cost) => return Ok(fit),
+            Ok(fit) => fits.push(fit),
+            Err(e) => errors.push(format!("{}: {e}", k.name())),
+        }
+    }
+    match fits.iter().position(|f| f.trusted(opts.max_cost)) {
+        Some(i) => Ok(fits.swap_remove(i)),
+        None => fits.pop().ok_or_else(|| errors.join("; ")),
+    }
+}
+
+/// Aligns one pair's clips on one kind of features.
+fn align_with(
+    kind: &dyn FeatureKind,
+    human: &Clip,
+    robot: &Clip,
+    opts: &AlignOptions,
+) -> std::result::Result<PairFit, String> {
     for c in [human, robot] {
         if c.images.len() < 2 {
             return Err(format!(
@@ -227,17 +282,24 @@ fn align_pair(
         })
         .count() as f64
         / al.path.len() as f64;
-    Ok((al, h, r, edge))
+    Ok(PairFit {
+        alignment: al,
+        human: h,
+        robot: r,
+        band_edge: edge,
+        kind: kind.name(),
+        untrusted_cost: kind.untrusted_cost(),
+    })
 }
 
-/// Loads and aligns one pair (for `milv-align show`): the clips' features and alignment.
+/// Loads and aligns one pair (for `milv-align show`).
 pub fn load_pair(
     ds: &Dataset,
     version: Option<u64>,
     pair_id: &str,
     kind: &dyn FeatureKind,
     opts: &AlignOptions,
-) -> Result<(crate::Features, crate::Features, Alignment)> {
+) -> Result<PairFit> {
     let v = ds.resolve(version)?;
     let eps = ops::episodes(ds, v)?;
     let pairs = pairs_of(&eps);
@@ -257,9 +319,7 @@ pub fn load_pair(
         rc.get(&r.episode_id)
             .ok_or_else(|| Error::Invalid(format!("episode {} has no frames", r.episode_id)))?,
     );
-    let (al, hf, rf, _) =
-        align_pair(kind, hc, rc, opts).map_err(|m| Error::Invalid(format!("pair {pair_id}: {m}")))?;
-    Ok((hf, rf, al))
+    align_pair(kind, hc, rc, opts).map_err(|m| Error::Invalid(format!("pair {pair_id}: {m}")))
 }
 
 type ClipMaps = (BTreeMap<String, Clip>, BTreeMap<String, Clip>);
@@ -340,7 +400,6 @@ pub fn align_dataset(
             }),
         }
     }
-    let max_cost = opts.max_cost.unwrap_or_else(|| kind.untrusted_cost());
     let refs: Vec<(&Episode, &Episode)> = good.iter().map(|(_, h, r)| (*h, *r)).collect();
     let (hclips, rclips) = clips_for(ds, v, kind, model.as_deref(), &refs)?;
     type PairResult = std::result::Result<(PairSummary, Alignment), String>;
@@ -361,8 +420,9 @@ pub fn align_dataset(
                 let rc = rclips
                     .get(&r.episode_id)
                     .ok_or_else(|| format!("robot episode {} has no frames", r.episode_id))?;
-                let (al, hf, _, edge) = align_pair(kind, hc, rc, opts)?;
-                let per_dim = al.normalized / hf.d.max(1) as f64;
+                let fit = align_pair(kind, hc, rc, opts)?;
+                let (per_dim, trusted) = (fit.cost_per_dim(), fit.trusted(opts.max_cost));
+                let (al, edge) = (fit.alignment, fit.band_edge);
                 let ((mean_err, max_err), (prop_mean, prop_max)) = match opts.truth.get(*p) {
                     Some(t) if t.len() == hc.images.len() => {
                         let got = row_to_col(&al.path, hc.images.len());
@@ -385,11 +445,12 @@ pub fn align_dataset(
                         robot_episode_id: r.episode_id.clone(),
                         human_frames: hc.images.len(),
                         robot_frames: rc.images.len(),
+                        features: fit.kind.to_string(),
                         normalized_cost: al.normalized,
                         cost_per_dim: per_dim,
                         path_length: al.path.len(),
                         band_edge_fraction: edge,
-                        trusted: per_dim <= max_cost && edge <= 0.1,
+                        trusted,
                         mean_frame_error: mean_err,
                         max_frame_error: max_err,
                         proportional_mean_error: prop_mean,
@@ -440,6 +501,10 @@ pub fn align_dataset(
         "run_id": run_id, "features": kind.name(), "band": opts.band, "step": opts.step, "model_id": model,
         "pairs": report.pairs.len(), "failed": report.failed.len(), "rows": report.rows,
         "untrusted": report.pairs.iter().filter(|p| !p.trusted).map(|p| &p.pair_id).collect::<Vec<_>>(),
+        "features_per_pair": report.pairs.iter().fold(BTreeMap::<&str, usize>::new(), |mut m, p| {
+            *m.entry(p.features.as_str()).or_default() += 1;
+            m
+        }),
     });
     report.version = ds.begin(meta)?.write_and_commit(
         TableKind::Alignments,
@@ -515,5 +580,104 @@ mod tests {
         assert_eq!(proportional_warp(1, 7), [0]);
         assert_eq!(frame_errors(&[0, 2, 4], &[0, 3, 7]), (Some(4.0 / 3.0), Some(3)));
         assert_eq!(frame_errors(&[], &[]), (None, None));
+    }
+
+    /// A kind whose robot features are the human's (a ramp, and 0) with `offset` in place
+    /// of the 0: its cost per dimension is about `offset² / 2`.
+    struct Offset {
+        name: &'static str,
+        offset: f64,
+        untrusted: f64,
+    }
+
+    impl FeatureKind for Offset {
+        fn name(&self) -> &'static str {
+            self.name
+        }
+        fn extract(&self, clip: &Clip) -> Result<crate::Features> {
+            if self.offset.is_nan() {
+                return Err(Error::Invalid(format!("{} cannot", self.name)));
+            }
+            let n = clip.images.len();
+            let shift = if clip.domain == milv_data::Domain::Robot {
+                self.offset
+            } else {
+                0.0
+            };
+            let rows = (0..n).flat_map(|t| [t as f64 / (n - 1) as f64, shift]);
+            crate::Features::new(n, 2, rows.collect())
+        }
+        fn untrusted_cost(&self) -> f64 {
+            self.untrusted
+        }
+    }
+
+    const fn offset(name: &'static str, offset: f64, untrusted: f64) -> Offset {
+        Offset {
+            name,
+            offset,
+            untrusted,
+        }
+    }
+
+    static FAR: Offset = offset("far", 0.2, 0.1);
+    static FAR_UNTRUSTED: Offset = offset("far-untrusted", 0.2, 0.01);
+    static FARTHER: Offset = offset("farther", 0.3, 0.01);
+    static NEAR: Offset = offset("near", 0.01, 0.1);
+    static BROKEN: Offset = offset("broken", f64::NAN, 0.1);
+
+    struct Cascade(&'static [(&'static dyn FeatureKind, f64)]);
+
+    impl FeatureKind for Cascade {
+        fn name(&self) -> &'static str {
+            "cascade"
+        }
+        fn extract(&self, _: &Clip) -> Result<crate::Features> {
+            unreachable!("a cascade extracts through its kinds")
+        }
+        fn cascade(&self) -> &'static [(&'static dyn FeatureKind, f64)] {
+            self.0
+        }
+    }
+
+    fn picked(cascade: &[(&'static dyn FeatureKind, f64)]) -> std::result::Result<&'static str, String> {
+        // A kind's cascade is static; a test's may leak.
+        let cascade = Box::leak(cascade.to_vec().into_boxed_slice());
+        let clip = |domain, n| Clip {
+            episode_id: format!("{domain:?}"),
+            domain,
+            encoding: milv_data::FrameEncoding::Raw,
+            width: 1,
+            height: 1,
+            images: vec![vec![0; 3]; n],
+            states: None,
+        };
+        let (h, r) = (
+            clip(milv_data::Domain::Human, 12),
+            clip(milv_data::Domain::Robot, 15),
+        );
+        align_pair(&Cascade(cascade), &h, &r, &AlignOptions::default()).map(|f| f.kind)
+    }
+
+    #[test]
+    fn a_cascade_keeps_the_first_kind_within_its_bound_else_the_first_trusted() {
+        // Within its bound: kept, the next kind is not needed.
+        assert_eq!(picked(&[(&NEAR, 0.01), (&FAR, f64::INFINITY)]), Ok("near"));
+        // Above its bound (cost ≈ 0.02): the next kind's alignment.
+        assert_eq!(picked(&[(&FAR, 0.01), (&NEAR, f64::INFINITY)]), Ok("near"));
+        // No kind within its bound: the first one whose alignment is trusted ...
+        assert_eq!(picked(&[(&FAR, 0.01), (&FARTHER, 0.01)]), Ok("far"));
+        // ... else the last that aligned at all, also when a later kind fails.
+        assert_eq!(picked(&[(&FAR_UNTRUSTED, 0.05), (&FARTHER, 0.01)]), Ok("farther"));
+        assert_eq!(picked(&[(&FAR_UNTRUSTED, 0.01), (&FARTHER, 0.01)]), Ok("farther"));
+        assert_eq!(
+            picked(&[(&FAR_UNTRUSTED, 0.01), (&BROKEN, 0.01)]),
+            Ok("far-untrusted")
+        );
+        // Nothing aligns: every kind's error, by name.
+        assert_eq!(
+            picked(&[(&BROKEN, 0.01), (&BROKEN, 0.01)]),
+            Err("broken: broken cannot; broken: broken cannot".to_string())
+        );
     }
 }

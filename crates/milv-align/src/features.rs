@@ -119,6 +119,14 @@ pub trait FeatureKind: Sync {
     fn fit_pair(&self, _human: &Features, robot: Features, _align: &Aligner) -> Features {
         robot
     }
+
+    /// For a kind that picks other kinds per pair: those kinds in order, each with the
+    /// cost per dimension up to which its trusted alignment is kept (else the next is
+    /// tried).
+    /// Empty for a kind that describes frames itself.
+    fn cascade(&self) -> &'static [(&'static dyn FeatureKind, f64)] {
+        &[]
+    }
 }
 
 /// The DTW a pair is aligned with (its band and step pattern), as the robot frame of
@@ -312,15 +320,51 @@ impl FeatureKind for Translated {
     }
 }
 
+/// `auto`: [`Motion`] where its model of the scene explains the pair, [`Track`]
+/// elsewhere.
+///
+/// Motion's table-plane features cost at most 0.0018 per dimension on true milv-sim pairs
+/// (median 0.0002) and at least 0.0015 on the MuJoCo set's (median 0.0035), where the
+/// arms move in 3-D and motion aligns worse than the proportional warp; track needs robot
+/// states and is worse than motion on milv-sim's pushing. So a pair whose motion cost is
+/// above [`AUTO_MOTION_COST`] is re-aligned on track; it keeps motion's alignment when
+/// motion's is trusted and track's is not (a true milv-sim pair is not newly flagged), and
+/// when track cannot align it, e.g. without robot states.
+///
+/// [`Track`]: crate::track::Track
+pub struct Auto;
+
+/// Motion's cost per dimension above which `auto` turns to track: between the design
+/// seeds' milv-sim pairs (3 of 40 above) and MuJoCo pairs (none of 20 below); BENCHMARKS.md.
+pub const AUTO_MOTION_COST: f64 = 0.0012;
+
+impl FeatureKind for Auto {
+    fn name(&self) -> &'static str {
+        "auto"
+    }
+
+    fn extract(&self, clip: &Clip) -> Result<Features, Error> {
+        Err(Error::Invalid(format!(
+            "episode {}: auto features are chosen per pair (motion or track), not per clip",
+            clip.episode_id
+        )))
+    }
+
+    fn cascade(&self) -> &'static [(&'static dyn FeatureKind, f64)] {
+        &[(&Motion, AUTO_MOTION_COST), (&crate::track::Track, f64::INFINITY)]
+    }
+}
+
 /// The feature kind named on the command line.
 pub fn by_name(name: &str) -> Result<&'static dyn FeatureKind, Error> {
     match name {
+        "auto" => Ok(&Auto),
         "motion" => Ok(&Motion),
         "state" => Ok(&State),
         "translated" => Ok(&Translated),
         "track" => Ok(&crate::track::Track),
         _ => Err(Error::Invalid(format!(
-            "unknown features {name:?} (motion | track | state | translated)"
+            "unknown features {name:?} (auto | motion | track | state | translated)"
         ))),
     }
 }
