@@ -207,18 +207,24 @@ impl PairFit {
         self.alignment.normalized / self.human.d.max(1) as f64
     }
 
-    /// Whether the alignment can be trusted: its cost within `max_cost` (default: its
-    /// kind's) and its path off the band's edge (a path along the edge was cut short).
+    /// Whether the features explain the pair: cost within `max_cost` (default: its kind's).
+    pub fn explained(&self, max_cost: Option<f64>) -> bool {
+        self.cost_per_dim() <= max_cost.unwrap_or(self.untrusted_cost)
+    }
+
+    /// Whether the alignment can be trusted: explained, and its path off the band's edge
+    /// (a path along the edge may have been cut short by the band).
     pub fn trusted(&self, max_cost: Option<f64>) -> bool {
-        self.cost_per_dim() <= max_cost.unwrap_or(self.untrusted_cost) && self.band_edge <= 0.1
+        self.explained(max_cost) && self.band_edge <= 0.1
     }
 }
 
 /// Aligns one pair's clips with `kind`, or, for a kind that picks per pair
-/// ([`FeatureKind::cascade`]), with the first of its kinds whose alignment is trusted and
-/// whose cost stays within its bound; when none does, the first whose alignment is
-/// trusted, else the last that aligned the pair at all (so a pair is not flagged for the
-/// sake of a kind that explains it worse).
+/// ([`FeatureKind::cascade`]), with the first of its kinds whose cost stays within its
+/// bound and explains the pair ([`PairFit::explained`]); when none does, the first that
+/// explains it, else the last that aligned it at all (so a pair is not flagged for the
+/// sake of a kind that explains it worse). The band's edge plays no part: both kinds
+/// share the band, and a strong warp puts either's path near its edge.
 fn align_pair(
     kind: &dyn FeatureKind,
     human: &Clip,
@@ -232,12 +238,14 @@ fn align_pair(
     let (mut fits, mut errors) = (Vec::new(), Vec::new());
     for &(k, keep_below) in cascade {
         match align_with(k, human, robot, opts) {
-            Ok(fit) if fit.cost_per_dim() <= keep_below && fit.trusted(opts.max_cost) => return Ok(fit),
+            Ok(fit) if fit.cost_per_dim() <= keep_below && fit.explained(opts.max_cost) => {
+                return Ok(fit);
+            }
             Ok(fit) => fits.push(fit),
             Err(e) => errors.push(format!("{}: {e}", k.name())),
         }
     }
-    match fits.iter().position(|f| f.trusted(opts.max_cost)) {
+    match fits.iter().position(|f| f.explained(opts.max_cost)) {
         Some(i) => Ok(fits.swap_remove(i)),
         None => fits.pop().ok_or_else(|| errors.join("; ")),
     }
@@ -660,12 +668,12 @@ mod tests {
     }
 
     #[test]
-    fn a_cascade_keeps_the_first_kind_within_its_bound_else_the_first_trusted() {
+    fn a_cascade_keeps_the_first_kind_within_its_bound_else_the_first_that_explains_the_pair() {
         // Within its bound: kept, the next kind is not needed.
         assert_eq!(picked(&[(&NEAR, 0.01), (&FAR, f64::INFINITY)]), Ok("near"));
         // Above its bound (cost ≈ 0.02): the next kind's alignment.
         assert_eq!(picked(&[(&FAR, 0.01), (&NEAR, f64::INFINITY)]), Ok("near"));
-        // No kind within its bound: the first one whose alignment is trusted ...
+        // No kind within its bound: the first one within its trust bound ...
         assert_eq!(picked(&[(&FAR, 0.01), (&FARTHER, 0.01)]), Ok("far"));
         // ... else the last that aligned at all, also when a later kind fails.
         assert_eq!(picked(&[(&FAR_UNTRUSTED, 0.05), (&FARTHER, 0.01)]), Ok("farther"));

@@ -328,8 +328,8 @@ impl FeatureKind for Translated {
 /// arms move in 3-D and motion aligns worse than the proportional warp; track needs robot
 /// states and is worse than motion on milv-sim's pushing. So a pair whose motion cost is
 /// above [`AUTO_MOTION_COST`] is re-aligned on track; it keeps motion's alignment when
-/// motion's is trusted and track's is not (a true milv-sim pair is not newly flagged), and
-/// when track cannot align it, e.g. without robot states.
+/// motion's cost is within motion's trust bound and track's is not (a true milv-sim pair is
+/// not newly flagged), and when track cannot align it, e.g. without robot states.
 ///
 /// [`Track`]: crate::track::Track
 pub struct Auto;
