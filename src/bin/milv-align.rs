@@ -16,7 +16,8 @@ use milv::data::{CommitMeta, Dataset, DatasetRef, Partition};
 /// new version. Prints a per-pair summary: normalised cost, path length, and a trust flag
 /// for pairs whose cost is high or whose path runs along the band's edge.
 ///
-///   milv-align DATASET[@V] --features auto|motion|track|state|translated [--band F] [--jobs N]
+///   milv-align DATASET[@V] [--features auto|motion|track|state|translated] [--band F] [--jobs N]
+///
 ///   milv-align show DATASET[@V] PAIR -o cost.png
 #[derive(Parser, Debug)]
 #[command(version, args_conflicts_with_subcommands = true)]
