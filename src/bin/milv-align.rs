@@ -311,10 +311,10 @@ fn run(args: Args) -> anyhow::Result<u8> {
                 r.n,
                 &format!(
                     "pair {pair}: {} cost, normalised {:.4}",
-                    if fit.kind == kind.name() {
-                        fit.kind.to_string()
+                    if fit.kind.name() == kind.name() {
+                        kind.name().to_string()
                     } else {
-                        format!("{} → {}", kind.name(), fit.kind)
+                        format!("{} → {}", kind.name(), fit.kind.name())
                     },
                     al.normalized
                 ),

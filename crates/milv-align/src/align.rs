@@ -23,7 +23,7 @@ pub struct AlignOptions {
     pub pairs: Option<BTreeSet<String>>,
     pub partition: Option<Partition>,
     /// A pair is flagged untrusted above this normalised cost per feature dimension
-    /// (default: [`FeatureKind::untrusted_cost`] of the feature kind).
+    /// (default: [`FeatureKind::untrusted_cost`] of the kind that aligned the pair).
     pub max_cost: Option<f64>,
     /// Ground truth per pair (human frame → robot frame), e.g. milv-sim's warps.jsonl.
     pub truth: BTreeMap<String, Vec<usize>>,
@@ -191,17 +191,15 @@ fn banded_dtw(a: &crate::Features, b: &crate::Features, opts: &AlignOptions) -> 
 
 /// One pair aligned: the alignment, both clips' features (the robot's fitted to the
 /// human's), the share of path cells on the band's edge, and the kind that aligned it.
-pub struct PairFit {
+pub struct PairFit<'k> {
     pub alignment: Alignment,
     pub human: crate::Features,
     pub robot: crate::Features,
     pub band_edge: f64,
-    pub kind: &'static str,
-    /// That kind's [`FeatureKind::untrusted_cost`].
-    pub untrusted_cost: f64,
+    pub kind: &'k dyn FeatureKind,
 }
 
-impl PairFit {
+impl PairFit<'_> {
     /// Normalised cost per feature dimension (comparable across feature kinds).
     pub fn cost_per_dim(&self) -> f64 {
         self.alignment.normalized / self.human.d.max(1) as f64
@@ -209,7 +207,7 @@ impl PairFit {
 
     /// Whether the features explain the pair: cost within `max_cost` (default: its kind's).
     pub fn explained(&self, max_cost: Option<f64>) -> bool {
-        self.cost_per_dim() <= max_cost.unwrap_or(self.untrusted_cost)
+        self.cost_per_dim() <= max_cost.unwrap_or_else(|| self.kind.untrusted_cost())
     }
 
     /// Whether the alignment can be trusted: explained, and its path off the band's edge
@@ -225,12 +223,12 @@ impl PairFit {
 /// explains it, else the last that aligned it at all (so a pair is not flagged for the
 /// sake of a kind that explains it worse). The band's edge plays no part: both kinds
 /// share the band, and a strong warp puts either's path near its edge.
-fn align_pair(
-    kind: &dyn FeatureKind,
+fn align_pair<'k>(
+    kind: &'k dyn FeatureKind,
     human: &Clip,
     robot: &Clip,
     opts: &AlignOptions,
-) -> std::result::Result<PairFit, String> {
+) -> std::result::Result<PairFit<'k>, String> {
     let cascade = kind.cascade();
     if cascade.is_empty() {
         return align_with(kind, human, robot, opts);
@@ -252,12 +250,12 @@ fn align_pair(
 }
 
 /// Aligns one pair's clips on one kind of features.
-fn align_with(
-    kind: &dyn FeatureKind,
+fn align_with<'k>(
+    kind: &'k dyn FeatureKind,
     human: &Clip,
     robot: &Clip,
     opts: &AlignOptions,
-) -> std::result::Result<PairFit, String> {
+) -> std::result::Result<PairFit<'k>, String> {
     for c in [human, robot] {
         if c.images.len() < 2 {
             return Err(format!(
@@ -295,19 +293,18 @@ fn align_with(
         human: h,
         robot: r,
         band_edge: edge,
-        kind: kind.name(),
-        untrusted_cost: kind.untrusted_cost(),
+        kind,
     })
 }
 
 /// Loads and aligns one pair (for `milv-align show`).
-pub fn load_pair(
+pub fn load_pair<'k>(
     ds: &Dataset,
     version: Option<u64>,
     pair_id: &str,
-    kind: &dyn FeatureKind,
+    kind: &'k dyn FeatureKind,
     opts: &AlignOptions,
-) -> Result<PairFit> {
+) -> Result<PairFit<'k>> {
     let v = ds.resolve(version)?;
     let eps = ops::episodes(ds, v)?;
     let pairs = pairs_of(&eps);
@@ -453,7 +450,7 @@ pub fn align_dataset(
                         robot_episode_id: r.episode_id.clone(),
                         human_frames: hc.images.len(),
                         robot_frames: rc.images.len(),
-                        features: fit.kind.to_string(),
+                        features: fit.kind.name().to_string(),
                         normalized_cost: al.normalized,
                         cost_per_dim: per_dim,
                         path_length: al.path.len(),
@@ -664,7 +661,7 @@ mod tests {
             clip(milv_data::Domain::Human, 12),
             clip(milv_data::Domain::Robot, 15),
         );
-        align_pair(&Cascade(cascade), &h, &r, &AlignOptions::default()).map(|f| f.kind)
+        align_pair(&Cascade(cascade), &h, &r, &AlignOptions::default()).map(|f| f.kind.name())
     }
 
     #[test]

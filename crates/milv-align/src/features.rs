@@ -121,9 +121,9 @@ pub trait FeatureKind: Sync {
     }
 
     /// For a kind that picks other kinds per pair: those kinds in order, each with the
-    /// cost per dimension up to which its trusted alignment is kept (else the next is
-    /// tried).
-    /// Empty for a kind that describes frames itself.
+    /// cost per dimension up to which its alignment is kept when also within the kind's
+    /// own [`untrusted_cost`](Self::untrusted_cost) (else the next is tried). Empty for a
+    /// kind that describes frames itself.
     fn cascade(&self) -> &'static [(&'static dyn FeatureKind, f64)] {
         &[]
     }
