@@ -42,15 +42,25 @@ fn simulated_pairs_align_within_the_goals() {
         let truth = sim.join("warps.jsonl");
         let pairs: Vec<String> = (0..8).map(|k| format!("{task}-{seed}-{k:04}")).collect();
         let pairs = pairs.join(",");
-        // `auto` is the default: run it without naming features.
-        for (features, goal) in [("state", 1.0), ("motion", 2.0), ("auto", 2.0)] {
+        // `auto` is the default: run it without naming features. `--temperature 0` decodes
+        // the best path instead of the posterior medians: a run of its own.
+        for (features, temperature, goal) in [
+            ("state", None, 1.0),
+            ("motion", None, 2.0),
+            ("motion", Some("0"), 2.0),
+            ("auto", None, 2.0),
+        ] {
             let mut args = vec![ds_s, "--pairs", &pairs, "--truth", path_str(&truth)];
             if features != "auto" {
                 args.extend(["--features", features]);
             }
+            if let Some(t) = temperature {
+                args.extend(["--temperature", t]);
+            }
             let (code, rep, err) = align_json(&args);
             assert_eq!(code, 0, "{err}");
             assert_eq!(rep["features"], features);
+            assert_eq!(rep["already_aligned"], 0, "{task} {features} {temperature:?}");
             let pairs = rep["pairs"].as_array().unwrap();
             assert_eq!(pairs.len(), 8);
             let mean = rep["mean_frame_error"].as_f64().unwrap();
@@ -101,6 +111,11 @@ fn simulated_pairs_align_within_the_goals() {
     let (code, _, err) = align_json(&[ds_s, "--features", "translated"]);
     assert_eq!(code, 1);
     assert!(err.contains("milv-train translate"), "{err}");
+
+    // A temperature below 0 is refused by name before anything is read.
+    let (code, _, err) = align_json(&[ds_s, "--temperature=-1"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("--temperature -1"), "{err}");
 }
 
 #[test]

@@ -12,7 +12,7 @@ use milv::data::{CommitMeta, Dataset, DatasetRef, Partition};
 
 /// Aligns every pair of a dataset version (episodes sharing a pair_id: one human, one
 /// robot clip of the same motion) by dynamic time warping inside a Sakoe-Chiba band, and
-/// commits the `alignments` table (one row per aligned frame pair, with its cost) as a
+/// commits the `alignments` table (each frame of both clips with its partner and their cost) as a
 /// new version. Prints a per-pair summary: normalised cost, path length, and a trust flag
 /// for pairs whose cost is high or whose path runs along the band's edge.
 ///
@@ -80,6 +80,13 @@ struct Common {
     /// auto: that of the kind it picked for the pair).
     #[arg(long)]
     max_cost: Option<f64>,
+    /// Each frame's partner is its median over all warping paths in the band, weighted
+    /// by exp(−cost / T) with T this many times the best path's mean local cost: where
+    /// several paths explain the clips almost equally, the median lies between them
+    /// (0: the best path's own cells, classic DTW). Costs and trust always rate the best
+    /// path.
+    #[arg(long, default_value_t = milv::align::POSTERIOR_TEMPERATURE)]
+    temperature: f64,
 }
 
 #[derive(Subcommand, Debug)]
@@ -98,7 +105,8 @@ enum Cmd {
         iters: usize,
     },
     /// Writes a PNG of one pair's cost matrix (human frames down, robot frames across)
-    /// with the warping path, to see whether an alignment can be trusted.
+    /// with each frame's partner (the cells the run writes to the alignments table), to
+    /// see whether an alignment can be trusted.
     Show {
         dataset: DatasetRef,
         pair: String,
@@ -115,6 +123,7 @@ fn options(c: &Common) -> AlignOptions {
         step: c.step,
         model_id: c.model_id.clone(),
         max_cost: c.max_cost,
+        temperature: c.temperature,
         ..AlignOptions::default()
     }
 }
@@ -320,7 +329,13 @@ fn run(args: Args) -> anyhow::Result<u8> {
                 ),
                 "robot frame",
                 "human frame",
-                Some(&al.path),
+                Some(
+                    &fit.correspondence
+                        .cells
+                        .iter()
+                        .map(|&(i, j, _)| (i, j))
+                        .collect::<Vec<_>>(),
+                ),
             )?;
             println!("wrote {}", out.display());
             Ok(cli::EXIT_OK)

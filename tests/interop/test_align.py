@@ -65,9 +65,11 @@ def test_paths_are_monotone_and_match_the_ground_truth(aligned):
         assert path[-1] == (len(truth[pair]) - 1, max(j for _, j in path))
         for (i0, j0), (i1, j1) in zip(path, path[1:]):
             assert 0 <= i1 - i0 <= 1 and 0 <= j1 - j0 <= 1
-        # Mean robot frame per human frame, as the report computes it.
+        # Mean robot frame per human frame of the path (the report's error uses each human
+        # frame's posterior median, the last cell of its row except in the last row).
         got = {}
         for i, j in path:
             got.setdefault(i, []).append(j)
         err = sum(abs(round(sum(v) / len(v)) - truth[pair][i]) for i, v in got.items()) / len(got)
         assert err <= 1.0, (pair, err)
+    assert all(p["mean_frame_error"] <= 1.0 for p in aligned["rep"]["pairs"]), aligned["rep"]["pairs"]

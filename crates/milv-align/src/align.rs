@@ -8,7 +8,7 @@ use milv_data::{
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::dtw::{Alignment, Band, StepPattern, dtw, row_to_col};
+use crate::dtw::{Alignment, Band, StepPattern, dtw, posterior_medians, row_to_col, staircase};
 use crate::features::{Clip, ClipSource, FeatureKind};
 use crate::{Error, Result};
 
@@ -27,7 +27,31 @@ pub struct AlignOptions {
     pub max_cost: Option<f64>,
     /// Ground truth per pair (human frame → robot frame), e.g. milv-sim's warps.jsonl.
     pub truth: BTreeMap<String, Vec<usize>>,
+    /// Each frame's partner is its median over warping paths weighted by
+    /// `exp(−cost / T)`, with `T` this many times the best path's mean local cost
+    /// ([`posterior_medians`]); 0 takes the best path's cells (classic DTW).
+    pub temperature: f64,
 }
+
+impl AlignOptions {
+    /// Refuses a band or temperature outside its range, naming the option.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.band > 0.0 && self.band <= 1.0) {
+            return Err(Error::Invalid(format!("--band {} must be in (0, 1]", self.band)));
+        }
+        if !(self.temperature >= 0.0 && self.temperature.is_finite()) {
+            return Err(Error::Invalid(format!(
+                "--temperature {} must be 0 (the best path) or positive",
+                self.temperature
+            )));
+        }
+        Ok(())
+    }
+}
+
+/// Default [`AlignOptions::temperature`]: a path whose cost exceeds the best one's by 20
+/// of its average cells weighs 1/e as much. Chosen on the design seeds (BENCHMARKS.md).
+pub const POSTERIOR_TEMPERATURE: f64 = 20.0;
 
 impl Default for AlignOptions {
     fn default() -> Self {
@@ -39,6 +63,7 @@ impl Default for AlignOptions {
             partition: None,
             max_cost: None,
             truth: BTreeMap::new(),
+            temperature: POSTERIOR_TEMPERATURE,
         }
     }
 }
@@ -189,10 +214,13 @@ fn banded_dtw(a: &crate::Features, b: &crate::Features, opts: &AlignOptions) -> 
     dtw(a, b, &band, opts.step, true)
 }
 
-/// One pair aligned: the alignment, both clips' features (the robot's fitted to the
-/// human's), the share of path cells on the band's edge, and the kind that aligned it.
+/// One pair aligned: the best path, the correspondence decoded from it, both clips'
+/// features (the robot's fitted to the human's), the share of path cells on the band's
+/// edge, and the kind that aligned it.
 pub struct PairFit<'k> {
+    /// The best warping path (its cost rates the pair).
     pub alignment: Alignment,
+    pub correspondence: Correspondence,
     pub human: crate::Features,
     pub robot: crate::Features,
     pub band_edge: f64,
@@ -249,6 +277,48 @@ fn align_pair<'k>(
     }
 }
 
+/// What a pair's alignment says about its frames.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Correspondence {
+    /// Each human frame's robot frame.
+    pub human_to_robot: Vec<usize>,
+    /// A monotone path of unit steps from the first frames to the last through every
+    /// human frame's robot frame, each cell with its local cost: the rows of the
+    /// `alignments` table (every frame of both clips has a partner).
+    pub cells: Vec<(usize, usize, f64)>,
+}
+
+impl Correspondence {
+    /// Decodes `al` (the best path of features `h` against `r`): by posterior medians at
+    /// `opts.temperature`; when that is 0, or the best path costs nothing (it explains
+    /// the pair exactly), the best path itself with each row's rounded mean column.
+    fn decode(h: &crate::Features, r: &crate::Features, al: &Alignment, opts: &AlignOptions) -> Result<Self> {
+        let mean_local = al.local.iter().sum::<f64>() / al.local.len().max(1) as f64;
+        let t = opts.temperature * mean_local;
+        if !(t > 0.0 && t.is_finite()) {
+            return Ok(Correspondence {
+                human_to_robot: row_to_col(&al.path, h.n),
+                cells: al
+                    .path
+                    .iter()
+                    .zip(&al.local)
+                    .map(|(&(i, j), &c)| (i, j, c))
+                    .collect(),
+            });
+        }
+        let band = Band::around_diagonal(h.n, r.n, band_width(h.n, r.n, opts));
+        let rows = posterior_medians(h, r, &band, opts.step, t)?;
+        let cells = staircase(&rows, r.n)
+            .into_iter()
+            .map(|(i, j)| (i, j, crate::dtw::sq_dist(h.row(i), r.row(j))))
+            .collect();
+        Ok(Correspondence {
+            human_to_robot: rows,
+            cells,
+        })
+    }
+}
+
 /// Aligns one pair's clips on one kind of features.
 fn align_with<'k>(
     kind: &'k dyn FeatureKind,
@@ -288,8 +358,10 @@ fn align_with<'k>(
         })
         .count() as f64
         / al.path.len() as f64;
+    let correspondence = Correspondence::decode(&h, &r, &al, opts).map_err(|e| e.to_string())?;
     Ok(PairFit {
         alignment: al,
+        correspondence,
         human: h,
         robot: r,
         band_edge: edge,
@@ -305,6 +377,7 @@ pub fn load_pair<'k>(
     kind: &'k dyn FeatureKind,
     opts: &AlignOptions,
 ) -> Result<PairFit<'k>> {
+    opts.validate()?;
     let v = ds.resolve(version)?;
     let eps = ops::episodes(ds, v)?;
     let pairs = pairs_of(&eps);
@@ -356,9 +429,7 @@ pub fn align_dataset(
     mut meta: CommitMeta,
     progress: &(dyn Fn() + Sync),
 ) -> Result<AlignReport> {
-    if !(opts.band > 0.0 && opts.band <= 1.0) {
-        return Err(Error::Invalid(format!("--band {} must be in (0, 1]", opts.band)));
-    }
+    opts.validate()?;
     let v = ds.resolve(version)?;
     let eps = ops::episodes(ds, v)?;
     let mut pairs = pairs_of(&eps);
@@ -379,6 +450,7 @@ pub fn align_dataset(
         kind.name().into(),
         format!("{:?}", opts.step),
         opts.band.to_string(),
+        format!("posterior {}", opts.temperature),
     ];
     parts.extend(model.clone());
     parts.extend(ds.files(TableKind::Frames, v)?.into_iter().map(|f| f.info.path));
@@ -407,7 +479,7 @@ pub fn align_dataset(
     }
     let refs: Vec<(&Episode, &Episode)> = good.iter().map(|(_, h, r)| (*h, *r)).collect();
     let (hclips, rclips) = clips_for(ds, v, kind, model.as_deref(), &refs)?;
-    type PairResult = std::result::Result<(PairSummary, Alignment), String>;
+    type PairResult = std::result::Result<(PairSummary, Correspondence), String>;
     let results: Vec<(String, PairResult)> = good
         .par_iter()
         .map(|(p, h, r)| {
@@ -427,12 +499,12 @@ pub fn align_dataset(
                     .ok_or_else(|| format!("robot episode {} has no frames", r.episode_id))?;
                 let fit = align_pair(kind, hc, rc, opts)?;
                 let (per_dim, trusted) = (fit.cost_per_dim(), fit.trusted(opts.max_cost));
-                let (al, edge) = (fit.alignment, fit.band_edge);
+                let (al, edge, corr) = (fit.alignment, fit.band_edge, fit.correspondence);
                 let ((mean_err, max_err), (prop_mean, prop_max)) = match opts.truth.get(*p) {
                     Some(t) if t.len() == hc.images.len() => {
-                        let got = row_to_col(&al.path, hc.images.len());
+                        let got = &corr.human_to_robot;
                         let prop = proportional_warp(hc.images.len(), rc.images.len());
-                        (frame_errors(&got, t), frame_errors(&prop, t))
+                        (frame_errors(got, t), frame_errors(&prop, t))
                     }
                     Some(t) => {
                         return Err(format!(
@@ -461,7 +533,7 @@ pub fn align_dataset(
                         proportional_mean_error: prop_mean,
                         proportional_max_error: prop_max,
                     },
-                    al,
+                    corr,
                 ))
             })();
             progress();
@@ -488,7 +560,7 @@ pub fn align_dataset(
         features: kind.name().into(),
         pairs: aligned.iter().map(|(s, _)| s.clone()).collect(),
         failed,
-        rows: aligned.iter().map(|(_, a)| a.path.len() as u64).sum(),
+        rows: aligned.iter().map(|(_, c)| c.cells.len() as u64).sum(),
         mean_frame_error: mean_over(&with_truth, |s| s.mean_frame_error),
         max_frame_error: with_truth.iter().filter_map(|s| s.max_frame_error).max(),
         proportional_mean_error: mean_over(&with_truth, |s| s.proportional_mean_error),
@@ -503,7 +575,8 @@ pub fn align_dataset(
         return Ok(report);
     }
     meta.summary = serde_json::json!({
-        "run_id": run_id, "features": kind.name(), "band": opts.band, "step": opts.step, "model_id": model,
+        "run_id": run_id, "features": kind.name(), "band": opts.band, "step": opts.step,
+        "temperature": opts.temperature, "model_id": model,
         "pairs": report.pairs.len(), "failed": report.failed.len(), "rows": report.rows,
         "untrusted": report.pairs.iter().filter(|p| !p.trusted).map(|p| &p.pair_id).collect::<Vec<_>>(),
         "features_per_pair": report.pairs.iter().fold(BTreeMap::<&str, usize>::new(), |mut m, p| {
@@ -516,8 +589,8 @@ pub fn align_dataset(
         Some(&run_id),
         ShardOptions::default(),
         |w| -> Result<()> {
-            for (s, al) in &aligned {
-                w.group(&s.pair_id, &alignment_rows(s, al, kind.name(), &run_id))?;
+            for (s, corr) in &aligned {
+                w.group(&s.pair_id, &alignment_rows(s, corr, kind.name(), &run_id))?;
             }
             Ok(())
         },
@@ -556,12 +629,12 @@ fn frame_errors(got: &[usize], truth: &[usize]) -> (Option<f64>, Option<usize>) 
     )
 }
 
-/// The `alignments` rows of one aligned pair: its DTW path with each cell's local cost.
-fn alignment_rows(s: &PairSummary, al: &Alignment, features: &str, run_id: &str) -> Vec<AlignmentRow> {
-    al.path
+/// The `alignments` rows of one aligned pair: every frame with its partner and their
+/// local cost.
+fn alignment_rows(s: &PairSummary, corr: &Correspondence, features: &str, run_id: &str) -> Vec<AlignmentRow> {
+    corr.cells
         .iter()
-        .zip(&al.local)
-        .map(|(&(h, r), &cost)| AlignmentRow {
+        .map(|&(h, r, cost)| AlignmentRow {
             pair_id: s.pair_id.clone(),
             human_episode_id: s.human_episode_id.clone(),
             human_frame: h as i32,

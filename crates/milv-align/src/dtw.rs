@@ -352,6 +352,145 @@ pub fn row_to_col(path: &[(usize, usize)], n: usize) -> Vec<usize> {
         .collect()
 }
 
+/// A monotone path of unit steps from (0, 0) to (n−1, m−1) through `(i, cols[i])` for
+/// every row (`cols` non-decreasing, `m` columns): where a row's column moves on, the
+/// path steps diagonally into the row and runs along it; the last row runs on to m−1.
+pub fn staircase(cols: &[usize], m: usize) -> Vec<(usize, usize)> {
+    let n = cols.len();
+    let mut path = Vec::with_capacity(n + m);
+    let mut j = 0;
+    for (i, &c) in cols.iter().enumerate() {
+        let c = if i + 1 == n { m.saturating_sub(1) } else { c }.max(j);
+        let first = if i > 0 && c > j { j + 1 } else { j };
+        path.extend((first..=c).map(|k| (i, k)));
+        j = c;
+    }
+    path
+}
+
+/// `ln(eᵃ + eᵇ)` without overflow.
+fn log_add(a: f64, b: f64) -> f64 {
+    let (hi, lo) = if a >= b { (a, b) } else { (b, a) };
+    if lo == f64::NEG_INFINITY {
+        hi
+    } else {
+        hi + (lo - hi).exp().ln_1p()
+    }
+}
+
+/// Index of the weighted median of log-weights `logw` (the first index where the running
+/// sum reaches half the total).
+fn weighted_median(logw: impl Iterator<Item = f64> + Clone) -> usize {
+    let top = logw.clone().fold(f64::NEG_INFINITY, f64::max);
+    let total: f64 = logw.clone().map(|l| (l - top).exp()).sum();
+    let mut cum = 0.0;
+    for (k, l) in logw.enumerate() {
+        cum += (l - top).exp();
+        if cum >= 0.5 * total {
+            return k;
+        }
+    }
+    0
+}
+
+/// Posterior decoding of the warping path: for each row, its median column. Every path
+/// inside `band` is weighted by `exp(−cost / temperature)`, its cost accumulated as
+/// `step` does; forward and backward sums give each cell's probability of lying on the
+/// path, and each row takes the median column of its cells (made non-decreasing).
+///
+/// Why not the single best path: where the features are flat or ambiguous, many paths
+/// cost nearly the same and the best one takes an arbitrary corner among them; the
+/// median over them minimises the expected |frame error| instead (posterior decoding, as
+/// for hidden Markov models).
+pub fn posterior_medians(
+    a: &Features,
+    b: &Features,
+    band: &Band,
+    step: StepPattern,
+    temperature: f64,
+) -> Result<Vec<usize>, Error> {
+    let (n, m) = (a.n, b.n);
+    if n == 0 || m == 0 || a.d != b.d || band.lo.len() != n || band.hi.iter().any(|&h| h >= m) {
+        return Err(Error::Invalid(format!(
+            "posterior: cannot align {n} x {m} frames of widths {} and {} in this band",
+            a.d, b.d
+        )));
+    }
+    if !(temperature > 0.0 && temperature.is_finite()) {
+        return Err(Error::Invalid(format!(
+            "posterior: temperature {temperature} must be positive"
+        )));
+    }
+    // Moves into a cell, as (rows back, columns back, weight of the cell's local cost).
+    let moves: [(usize, usize, f64); 3] = match step {
+        StepPattern::Symmetric1 => [(1, 1, 1.0), (1, 0, 1.0), (0, 1, 1.0)],
+        StepPattern::Symmetric2 => [(1, 1, 2.0), (1, 0, 1.0), (0, 1, 1.0)],
+        StepPattern::Asymmetric => [(1, 0, 1.0), (1, 1, 1.0), (1, 2, 1.0)],
+    };
+    let mut offsets = Vec::with_capacity(n + 1);
+    let mut o = 0;
+    for i in 0..n {
+        offsets.push(o);
+        o += band.hi[i] + 1 - band.lo[i];
+    }
+    offsets.push(o);
+    let at = |i: usize, j: usize| {
+        (band.lo[i]..=band.hi[i])
+            .contains(&j)
+            .then(|| offsets[i] + j - band.lo[i])
+    };
+    // The band's cells in storage order (rows, then columns): forward in this order,
+    // backward in reverse.
+    let cells: Vec<(usize, usize)> = (0..n)
+        .flat_map(|i| (band.lo[i]..=band.hi[i]).map(move |j| (i, j)))
+        .collect();
+    // Log-weight of each cell's local cost.
+    let lw: Vec<f64> = cells
+        .iter()
+        .map(|&(i, j)| -sq_dist(a.row(i), b.row(j)) / temperature)
+        .collect();
+    let neg = f64::NEG_INFINITY;
+    let mut fwd = vec![neg; o];
+    for (c, &(i, j)) in cells.iter().enumerate() {
+        fwd[c] = if i == 0 && j == 0 {
+            lw[c]
+        } else {
+            moves
+                .iter()
+                .filter(|&&(di, dj, _)| i >= di && j >= dj)
+                .filter_map(|&(di, dj, w)| at(i - di, j - dj).map(|p| fwd[p] + w * lw[c]))
+                .fold(neg, log_add)
+        };
+    }
+    let mut bwd = vec![neg; o];
+    for (c, &(i, j)) in cells.iter().enumerate().rev() {
+        bwd[c] = if i == n - 1 && j == m - 1 {
+            0.0
+        } else {
+            moves
+                .iter()
+                .filter(|&&(di, dj, _)| i + di < n && j + dj < m)
+                .filter_map(|&(di, dj, w)| at(i + di, j + dj).map(|q| bwd[q] + w * lw[q]))
+                .fold(neg, log_add)
+        };
+    }
+    if at(n - 1, m - 1).is_none_or(|c| fwd[c] == neg) {
+        return Err(Error::Invalid(format!(
+            "posterior: no warping path within the band for {n} x {m} frames"
+        )));
+    }
+    let mut hi = 0;
+    Ok((0..n)
+        .map(|i| {
+            let row = fwd[offsets[i]..offsets[i + 1]]
+                .iter()
+                .zip(&bwd[offsets[i]..offsets[i + 1]]);
+            hi = hi.max(band.lo[i] + weighted_median(row.map(|(f, b)| f + b)));
+            hi
+        })
+        .collect())
+}
+
 #[cfg(test)]
 #[allow(clippy::unwrap_used)]
 mod tests {
@@ -445,5 +584,57 @@ mod tests {
             )
             .is_err()
         );
+    }
+
+    /// A plateau of 6 human frames against 3 robot frames: every path through it costs
+    /// nothing, the best path takes a corner (ties resolve to one side), and the posterior
+    /// median spreads the rows evenly over the columns, as the true (proportional) match
+    /// within the plateau would.
+    #[test]
+    fn posterior_medians_spread_a_flat_stretch_where_the_best_path_takes_a_corner() {
+        let a = seq(&[0.0, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.5, 2.0]);
+        let b = seq(&[0.0, 0.5, 1.0, 1.0, 1.0, 1.5, 2.0]);
+        let band = Band::full(a.n, b.n);
+        let best = dtw(&a, &b, &band, StepPattern::Symmetric2, true).unwrap();
+        assert_eq!(row_to_col(&best.path, a.n), [0, 1, 2, 2, 2, 2, 3, 4, 5, 6]);
+        for t in [0.01, 0.1, 1.0] {
+            let med = posterior_medians(&a, &b, &band, StepPattern::Symmetric2, t).unwrap();
+            assert_eq!(med, [0, 1, 2, 2, 3, 3, 4, 4, 5, 6], "temperature {t}");
+        }
+    }
+
+    #[test]
+    fn posterior_medians_of_a_sequence_against_itself_are_the_identity() {
+        let v: Vec<f64> = (0..30).map(|k| (k as f64 * 0.3).sin() + k as f64 * 0.1).collect();
+        let a = seq(&v);
+        for step in [
+            StepPattern::Symmetric1,
+            StepPattern::Symmetric2,
+            StepPattern::Asymmetric,
+        ] {
+            let med = posterior_medians(&a, &a, &Band::around_diagonal(30, 30, 6), step, 0.05).unwrap();
+            assert_eq!(med, (0..30).collect::<Vec<_>>(), "{step:?}");
+        }
+    }
+
+    #[test]
+    fn a_staircase_is_a_connected_monotone_path_through_each_rows_column() {
+        assert_eq!(
+            staircase(&[0, 2, 2, 3], 6),
+            [(0, 0), (1, 1), (1, 2), (2, 2), (3, 3), (3, 4), (3, 5)]
+        );
+        assert_eq!(staircase(&[1, 1], 2), [(0, 0), (0, 1), (1, 1)]);
+        assert_eq!(staircase(&[0], 3), [(0, 0), (0, 1), (0, 2)]);
+    }
+
+    #[test]
+    fn posterior_medians_refuse_a_bad_temperature_or_band() {
+        let a = seq(&[0.0, 1.0, 2.0]);
+        for t in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert!(posterior_medians(&a, &a, &Band::full(3, 3), StepPattern::Symmetric2, t).is_err());
+        }
+        let long = seq(&[0.0; 9]);
+        let err = posterior_medians(&a, &long, &Band::absolute(3, 9, 0), StepPattern::Asymmetric, 1.0);
+        assert!(err.unwrap_err().to_string().contains("no warping path"));
     }
 }
