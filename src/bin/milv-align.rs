@@ -307,7 +307,9 @@ fn run(args: Args) -> anyhow::Result<u8> {
         }) => {
             let ds = Dataset::open(&dataset.root).with_context(|| format!("opening {dataset}"))?;
             let kind = features::by_name(&common.features)?;
-            let fit = load_pair(&ds, dataset.version, &pair, kind, &options(&common))?;
+            let opts = options(&common);
+            let fit = load_pair(&ds, dataset.version, &pair, kind, &opts)?;
+            let corr = fit.correspondence(&opts)?;
             let (h, r, al) = (&fit.human, &fit.robot, &fit.alignment);
             let cost: Vec<f64> = (0..h.n)
                 .flat_map(|i| (0..r.n).map(move |j| (i, j)))
@@ -329,13 +331,7 @@ fn run(args: Args) -> anyhow::Result<u8> {
                 ),
                 "robot frame",
                 "human frame",
-                Some(
-                    &fit.correspondence
-                        .cells
-                        .iter()
-                        .map(|&(i, j, _)| (i, j))
-                        .collect::<Vec<_>>(),
-                ),
+                Some(&corr.cells.iter().map(|&(i, j, _)| (i, j)).collect::<Vec<_>>()),
             )?;
             println!("wrote {}", out.display());
             Ok(cli::EXIT_OK)

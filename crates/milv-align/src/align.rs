@@ -208,19 +208,21 @@ fn band_width(n: usize, m: usize, opts: &AlignOptions) -> usize {
     (opts.band * n.max(m) as f64).ceil() as usize
 }
 
-/// DTW of two feature matrices in the run's band, with its step pattern.
-fn banded_dtw(a: &crate::Features, b: &crate::Features, opts: &AlignOptions) -> Result<Alignment> {
-    let band = Band::around_diagonal(a.n, b.n, band_width(a.n, b.n, opts));
-    dtw(a, b, &band, opts.step, true)
+/// The run's band for clips of `n` and `m` frames.
+fn run_band(n: usize, m: usize, opts: &AlignOptions) -> Band {
+    Band::around_diagonal(n, m, band_width(n, m, opts))
 }
 
-/// One pair aligned: the best path, the correspondence decoded from it, both clips'
-/// features (the robot's fitted to the human's), the share of path cells on the band's
-/// edge, and the kind that aligned it.
+/// DTW of two feature matrices in the run's band, with its step pattern.
+fn banded_dtw(a: &crate::Features, b: &crate::Features, opts: &AlignOptions) -> Result<Alignment> {
+    dtw(a, b, &run_band(a.n, b.n, opts), opts.step, true)
+}
+
+/// One pair aligned: the best path, both clips' features (the robot's fitted to the
+/// human's), the share of path cells on the band's edge, and the kind that aligned it.
 pub struct PairFit<'k> {
     /// The best warping path (its cost rates the pair).
     pub alignment: Alignment,
-    pub correspondence: Correspondence,
     pub human: crate::Features,
     pub robot: crate::Features,
     pub band_edge: f64,
@@ -242,6 +244,36 @@ impl PairFit<'_> {
     /// (a path along the edge may have been cut short by the band).
     pub fn trusted(&self, max_cost: Option<f64>) -> bool {
         self.explained(max_cost) && self.band_edge <= 0.1
+    }
+
+    /// Each frame's partner, decoded from the best path by posterior medians at
+    /// `opts.temperature`; when that is 0, or the best path costs nothing (it explains
+    /// the pair exactly), the best path itself with each row's rounded mean column.
+    /// (Only for the fit a run keeps: `auto` discards the others undecoded.)
+    pub fn correspondence(&self, opts: &AlignOptions) -> Result<Correspondence> {
+        let (h, r, al) = (&self.human, &self.robot, &self.alignment);
+        let mean_local = al.local.iter().sum::<f64>() / al.local.len().max(1) as f64;
+        let t = opts.temperature * mean_local;
+        if !(t > 0.0 && t.is_finite()) {
+            return Ok(Correspondence {
+                human_to_robot: row_to_col(&al.path, h.n),
+                cells: al
+                    .path
+                    .iter()
+                    .zip(&al.local)
+                    .map(|(&(i, j), &c)| (i, j, c))
+                    .collect(),
+            });
+        }
+        let rows = posterior_medians(h, r, &run_band(h.n, r.n, opts), opts.step, t)?;
+        let cells = staircase(&rows, r.n)
+            .into_iter()
+            .map(|(i, j)| (i, j, crate::dtw::sq_dist(h.row(i), r.row(j))))
+            .collect();
+        Ok(Correspondence {
+            human_to_robot: rows,
+            cells,
+        })
     }
 }
 
@@ -288,37 +320,6 @@ pub struct Correspondence {
     pub cells: Vec<(usize, usize, f64)>,
 }
 
-impl Correspondence {
-    /// Decodes `al` (the best path of features `h` against `r`): by posterior medians at
-    /// `opts.temperature`; when that is 0, or the best path costs nothing (it explains
-    /// the pair exactly), the best path itself with each row's rounded mean column.
-    fn decode(h: &crate::Features, r: &crate::Features, al: &Alignment, opts: &AlignOptions) -> Result<Self> {
-        let mean_local = al.local.iter().sum::<f64>() / al.local.len().max(1) as f64;
-        let t = opts.temperature * mean_local;
-        if !(t > 0.0 && t.is_finite()) {
-            return Ok(Correspondence {
-                human_to_robot: row_to_col(&al.path, h.n),
-                cells: al
-                    .path
-                    .iter()
-                    .zip(&al.local)
-                    .map(|(&(i, j), &c)| (i, j, c))
-                    .collect(),
-            });
-        }
-        let band = Band::around_diagonal(h.n, r.n, band_width(h.n, r.n, opts));
-        let rows = posterior_medians(h, r, &band, opts.step, t)?;
-        let cells = staircase(&rows, r.n)
-            .into_iter()
-            .map(|(i, j)| (i, j, crate::dtw::sq_dist(h.row(i), r.row(j))))
-            .collect();
-        Ok(Correspondence {
-            human_to_robot: rows,
-            cells,
-        })
-    }
-}
-
 /// Aligns one pair's clips on one kind of features.
 fn align_with<'k>(
     kind: &'k dyn FeatureKind,
@@ -358,10 +359,8 @@ fn align_with<'k>(
         })
         .count() as f64
         / al.path.len() as f64;
-    let correspondence = Correspondence::decode(&h, &r, &al, opts).map_err(|e| e.to_string())?;
     Ok(PairFit {
         alignment: al,
-        correspondence,
         human: h,
         robot: r,
         band_edge: edge,
@@ -499,7 +498,8 @@ pub fn align_dataset(
                     .ok_or_else(|| format!("robot episode {} has no frames", r.episode_id))?;
                 let fit = align_pair(kind, hc, rc, opts)?;
                 let (per_dim, trusted) = (fit.cost_per_dim(), fit.trusted(opts.max_cost));
-                let (al, edge, corr) = (fit.alignment, fit.band_edge, fit.correspondence);
+                let corr = fit.correspondence(opts).map_err(|e| e.to_string())?;
+                let (al, edge) = (fit.alignment, fit.band_edge);
                 let ((mean_err, max_err), (prop_mean, prop_max)) = match opts.truth.get(*p) {
                     Some(t) if t.len() == hc.images.len() => {
                         let got = &corr.human_to_robot;

@@ -176,15 +176,8 @@ const UP: u8 = 1; // from (i−1, j)
 const LEFT: u8 = 2; // from (i, j−1)
 const SKIP: u8 = 3; // from (i−1, j−2), asymmetric only
 
-/// Aligns `a` (rows) with `b` (columns) inside `band`; `keep_path` false computes only the
-/// cost (O(band) memory). Local cost: squared Euclidean distance of feature rows.
-pub fn dtw(
-    a: &Features,
-    b: &Features,
-    band: &Band,
-    step: StepPattern,
-    keep_path: bool,
-) -> Result<Alignment, Error> {
+/// Refuses an empty clip, features of different widths, or a band of another shape.
+fn check_inputs(a: &Features, b: &Features, band: &Band) -> Result<(), Error> {
     let (n, m) = (a.n, b.n);
     if n == 0 || m == 0 {
         return Err(Error::Invalid(format!(
@@ -200,6 +193,20 @@ pub fn dtw(
     if band.lo.len() != n || band.hi.iter().any(|&h| h >= m) {
         return Err(Error::Invalid(format!("band does not fit a {n} x {m} matrix")));
     }
+    Ok(())
+}
+
+/// Aligns `a` (rows) with `b` (columns) inside `band`; `keep_path` false computes only the
+/// cost (O(band) memory). Local cost: squared Euclidean distance of feature rows.
+pub fn dtw(
+    a: &Features,
+    b: &Features,
+    band: &Band,
+    step: StepPattern,
+    keep_path: bool,
+) -> Result<Alignment, Error> {
+    check_inputs(a, b, band)?;
+    let (n, m) = (a.n, b.n);
     let inf = f64::INFINITY;
     // Offsets of each row's band in the back-pointer store.
     let mut offsets = Vec::with_capacity(if keep_path { n + 1 } else { 0 });
@@ -409,13 +416,8 @@ pub fn posterior_medians(
     step: StepPattern,
     temperature: f64,
 ) -> Result<Vec<usize>, Error> {
+    check_inputs(a, b, band)?;
     let (n, m) = (a.n, b.n);
-    if n == 0 || m == 0 || a.d != b.d || band.lo.len() != n || band.hi.iter().any(|&h| h >= m) {
-        return Err(Error::Invalid(format!(
-            "posterior: cannot align {n} x {m} frames of widths {} and {} in this band",
-            a.d, b.d
-        )));
-    }
     if !(temperature > 0.0 && temperature.is_finite()) {
         return Err(Error::Invalid(format!(
             "posterior: temperature {temperature} must be positive"
