@@ -4,14 +4,23 @@
 //! Nothing here knows the scene: no table, no border the arm enters from. Corners are
 //! picked in the first frame wherever anything moves later; the points that travel
 //! farthest are on the part of the arm farthest from its fixed base, i.e. the hand or
-//! gripper, whatever the camera.
+//! gripper, whatever the camera. When a lost point had out-travelled every survivor, the
+//! hand was lost (it turns and changes its texture) and the clip is tracked again with a
+//! larger window (BENCHMARKS.md, "A lost hand is tracked again").
 
 use crate::motion;
 
-/// LK window half-width (9×9 window).
-const HALF_WIN: isize = 4;
-/// Pyramid levels above the full image.
-const LEVELS: usize = 2;
+/// The tracker's window: LK half-width and pyramid levels above the full image.
+#[derive(Clone, Copy)]
+struct Window {
+    half: isize,
+    levels: usize,
+}
+/// 9×9 on 3 levels: holds a small textured hand in a cluttered scene.
+const FINE: Window = Window { half: 4, levels: 2 };
+/// 15×15 on 4 levels: the retry when the fine window lost the hand (the hand's own texture
+/// changes as it turns; the larger window also holds on to its outline).
+const COARSE: Window = Window { half: 7, levels: 3 };
 const LK_ITERS: usize = 30;
 const LK_EPS: f64 = 0.01;
 /// A point whose forward-then-backward track misses its start by more (pixels) is lost.
@@ -113,11 +122,11 @@ struct Pyramid {
 }
 
 impl Pyramid {
-    fn new(img: Gray) -> Pyramid {
-        let mut levels = Vec::with_capacity(LEVELS + 1);
+    fn new(img: Gray, n_levels: usize) -> Pyramid {
+        let mut levels = Vec::with_capacity(n_levels + 1);
         let mut cur = img;
-        for l in 0..=LEVELS {
-            let next = (l < LEVELS).then(|| cur.down());
+        for l in 0..=n_levels {
+            let next = (l < n_levels).then(|| cur.down());
             let (gx, gy) = cur.gradients();
             levels.push((cur, gx, gy));
             match next {
@@ -131,7 +140,7 @@ impl Pyramid {
 
 /// Where point `p` of frame `a` is in frame `b`; `None` when the window leaves the image
 /// or has no texture to lock on to.
-fn lk(a: &Pyramid, b: &Pyramid, p: (f64, f64)) -> Option<(f64, f64)> {
+fn lk(a: &Pyramid, b: &Pyramid, p: (f64, f64), half: isize) -> Option<(f64, f64)> {
     let mut g = (0.0f64, 0.0f64);
     for l in (0..a.levels.len()).rev() {
         let (ia, gx, gy) = &a.levels[l];
@@ -139,9 +148,9 @@ fn lk(a: &Pyramid, b: &Pyramid, p: (f64, f64)) -> Option<(f64, f64)> {
         let s = f64::from(1u32 << l);
         let (px, py) = (p.0 / s, p.1 / s);
         let (mut gxx, mut gxy, mut gyy) = (0.0, 0.0, 0.0);
-        let mut win = Vec::with_capacity(((2 * HALF_WIN + 1) * (2 * HALF_WIN + 1)) as usize);
-        for oy in -HALF_WIN..=HALF_WIN {
-            for ox in -HALF_WIN..=HALF_WIN {
+        let mut win = Vec::with_capacity(((2 * half + 1) * (2 * half + 1)) as usize);
+        for oy in -half..=half {
+            for ox in -half..=half {
                 let (x, y) = (px + ox as f64, py + oy as f64);
                 let (dx, dy) = (gx.sample(x, y), gy.sample(x, y));
                 gxx += dx * dx;
@@ -154,7 +163,13 @@ fn lk(a: &Pyramid, b: &Pyramid, p: (f64, f64)) -> Option<(f64, f64)> {
         let det = gxx * gyy - gxy * gxy;
         let min_eig = 0.5 * (gxx + gyy - ((gxx - gyy).powi(2) + 4.0 * gxy * gxy).sqrt());
         if min_eig / count < 1e-4 || det.abs() < 1e-12 {
-            return None;
+            // As OpenCV's pyramidal LK: a coarse level too blurred to lock on to passes its
+            // guess down; only the full image decides that a point is lost.
+            if l == 0 {
+                return None;
+            }
+            g = (2.0 * g.0, 2.0 * g.1);
+            continue;
         }
         let mut v = (0.0f64, 0.0f64);
         for _ in 0..LK_ITERS {
@@ -258,26 +273,49 @@ fn motion_mask(frames: &[Vec<u8>], w: usize, h: usize) -> Vec<bool> {
 /// The tracks (pixel positions, one per frame) of the [`TOP_POINTS`] points that travel
 /// farthest among those tracked through the whole clip (RGB24 frames of `w`×`h`),
 /// farthest first; `None` when nothing moves or no point survives.
+///
+/// When a point the tracker lost had travelled farther before it was lost than every
+/// point that survived, the hand itself was lost and the survivors are on the slower
+/// shoulder or torso: the clip is tracked again with the [`COARSE`] window.
 pub fn hand_tracks(frames: &[Vec<u8>], w: usize, h: usize) -> Option<Vec<Vec<(f64, f64)>>> {
-    let n = frames.len();
-    if n < 2 {
+    if frames.len() < 2 {
         return None;
     }
     let mask = motion_mask(frames, w, h);
-    let pyr: Vec<Pyramid> = frames
+    let gray: Vec<Gray> = frames.iter().map(|f| Gray::from_rgb(f, w, h)).collect();
+    let (gx, gy) = gray[0].gradients();
+    let start = corners(&gx, &gy, &mask);
+    let fine = follow(&gray, &start, FINE);
+    let fine = if fine.hand_lost() {
+        follow(&gray, &start, COARSE)
+    } else {
+        fine
+    };
+    fine.top()
+}
+
+/// Points followed through a clip.
+struct Followed {
+    /// Per point, its position in every frame (held at the last one after it is lost).
+    tracks: Vec<Vec<(f64, f64)>>,
+    alive: Vec<bool>,
+}
+
+/// Follows `start` (points of the first frame) through `gray` with `window`; a point is
+/// lost when LK fails or its forward–backward check misses by [`FB_MAX`].
+fn follow(gray: &[Gray], start: &[(f64, f64)], window: Window) -> Followed {
+    let pyr: Vec<Pyramid> = gray
         .iter()
-        .map(|f| Pyramid::new(Gray::from_rgb(f, w, h)))
+        .map(|g| Pyramid::new(g.clone(), window.levels))
         .collect();
-    let (_, gx, gy) = &pyr[0].levels[0];
-    let start = corners(gx, gy, &mask);
-    let mut pts: Vec<Vec<(f64, f64)>> = start.iter().map(|&p| vec![p]).collect();
+    let mut tracks: Vec<Vec<(f64, f64)>> = start.iter().map(|&p| vec![p]).collect();
     let mut alive = vec![true; start.len()];
-    for t in 1..n {
-        for (k, track) in pts.iter_mut().enumerate() {
+    for t in 1..gray.len() {
+        for (k, track) in tracks.iter_mut().enumerate() {
             let p = track[t - 1];
             let next = if alive[k] {
-                lk(&pyr[t - 1], &pyr[t], p).filter(|&q| {
-                    lk(&pyr[t], &pyr[t - 1], q)
+                lk(&pyr[t - 1], &pyr[t], p, window.half).filter(|&q| {
+                    lk(&pyr[t], &pyr[t - 1], q, window.half)
                         .is_some_and(|back| (back.0 - p.0).hypot(back.1 - p.1) < FB_MAX)
                 })
             } else {
@@ -292,31 +330,56 @@ pub fn hand_tracks(frames: &[Vec<u8>], w: usize, h: usize) -> Option<Vec<Vec<(f6
             }
         }
     }
-    let mut travelled: Vec<(f64, usize)> = pts
-        .iter()
-        .enumerate()
-        .filter(|&(k, _)| alive[k])
-        .map(|(k, tr)| {
-            (
-                tr.windows(2)
-                    .map(|s| (s[1].0 - s[0].0).hypot(s[1].1 - s[0].1))
-                    .sum(),
-                k,
-            )
-        })
-        .collect();
-    travelled.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-    let top: Vec<usize> = travelled
-        .iter()
-        .take(TOP_POINTS)
-        // Points that hardly move (background corners at the mask's edge) are no hand.
-        .filter(|t| t.0 > 0.0 && t.0 >= MIN_TRAVEL_SHARE * travelled[0].0)
-        .map(|t| t.1)
-        .collect();
-    if top.is_empty() {
-        return None;
+    Followed { tracks, alive }
+}
+
+impl Followed {
+    fn travel(track: &[(f64, f64)]) -> f64 {
+        track
+            .windows(2)
+            .map(|s| (s[1].0 - s[0].0).hypot(s[1].1 - s[0].1))
+            .sum()
     }
-    Some(top.into_iter().map(|k| std::mem::take(&mut pts[k])).collect())
+
+    /// Whether a lost point had travelled farther than every surviving one.
+    fn hand_lost(&self) -> bool {
+        let farthest = |alive: bool| {
+            self.tracks
+                .iter()
+                .zip(&self.alive)
+                .filter(|&(_, &a)| a == alive)
+                .map(|(t, _)| Self::travel(t))
+                .fold(0.0, f64::max)
+        };
+        farthest(false) > farthest(true)
+    }
+
+    /// The [`TOP_POINTS`] most travelled surviving tracks, farthest first.
+    fn top(mut self) -> Option<Vec<Vec<(f64, f64)>>> {
+        let mut travelled: Vec<(f64, usize)> = self
+            .tracks
+            .iter()
+            .enumerate()
+            .filter(|&(k, _)| self.alive[k])
+            .map(|(k, t)| (Self::travel(t), k))
+            .collect();
+        travelled.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        let top: Vec<usize> = travelled
+            .iter()
+            .take(TOP_POINTS)
+            // Points that hardly move (background corners at the mask's edge) are no hand.
+            .filter(|t| t.0 > 0.0 && t.0 >= MIN_TRAVEL_SHARE * travelled[0].0)
+            .map(|t| t.1)
+            .collect();
+        if top.is_empty() {
+            return None;
+        }
+        Some(
+            top.into_iter()
+                .map(|k| std::mem::take(&mut self.tracks[k]))
+                .collect(),
+        )
+    }
 }
 
 #[cfg(test)]
@@ -360,6 +423,46 @@ mod tests {
                 .count();
             assert!(held >= 18, "{held} of 20 frames: {track:?}");
         }
+    }
+
+    #[test]
+    fn a_lost_point_that_outran_every_survivor_means_the_hand_was_lost() {
+        let line = |len: usize, speed: f64| (0..len).map(|t| (speed * t as f64, 0.0)).collect::<Vec<_>>();
+        // The fast point is lost at frame 6 after 10 px; the survivor moves 8 px in all.
+        let mut lost = line(6, 2.0);
+        lost.resize(9, lost[5]);
+        let f = Followed {
+            tracks: vec![lost.clone(), line(9, 1.0)],
+            alive: vec![false, true],
+        };
+        assert!(f.hand_lost());
+        // A survivor that travels farther than anything lost keeps the fine tracks.
+        let f = Followed {
+            tracks: vec![lost, line(9, 1.5)],
+            alive: vec![false, true],
+        };
+        assert!(!f.hand_lost());
+        assert_eq!(f.top().unwrap().len(), 1);
+    }
+
+    #[test]
+    fn the_coarse_window_follows_the_patch_too() {
+        // At the frame size of the sets it is meant for (its coarsest level is 1/8 of it).
+        let (w, h) = (128, 128);
+        let path: Vec<(f64, f64)> = (0..12)
+            .map(|t| (30.0 + 4.0 * t as f64, 40.0 + 2.0 * t as f64))
+            .collect();
+        let gray: Vec<Gray> = path
+            .iter()
+            .map(|&(x, y)| Gray::from_rgb(&frame(w, h, x, y), w, h))
+            .collect();
+        let f = follow(&gray, &[(path[0].0 - 1.0, path[0].1 - 1.0)], COARSE);
+        assert!(f.alive[0]);
+        let end = f.tracks[0][11];
+        assert!(
+            (end.0 - path[11].0 + 1.0).hypot(end.1 - path[11].1 + 1.0) < 1.0,
+            "{end:?}"
+        );
     }
 
     #[test]
