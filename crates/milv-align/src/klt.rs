@@ -138,8 +138,8 @@ impl Pyramid {
     }
 }
 
-/// Where point `p` of frame `a` is in frame `b`; `None` when the window leaves the image
-/// or has no texture to lock on to.
+/// Where point `p` of frame `a` is in frame `b` (LK window half-width `half`); `None` when
+/// the window leaves the image or has no texture to lock on to in the full image.
 fn lk(a: &Pyramid, b: &Pyramid, p: (f64, f64), half: isize) -> Option<(f64, f64)> {
     let mut g = (0.0f64, 0.0f64);
     for l in (0..a.levels.len()).rev() {
@@ -286,12 +286,12 @@ pub fn hand_tracks(frames: &[Vec<u8>], w: usize, h: usize) -> Option<Vec<Vec<(f6
     let (gx, gy) = gray[0].gradients();
     let start = corners(&gx, &gy, &mask);
     let fine = follow(&gray, &start, FINE);
-    let fine = if fine.hand_lost() {
+    let followed = if fine.hand_lost() {
         follow(&gray, &start, COARSE)
     } else {
         fine
     };
-    fine.top()
+    followed.top()
 }
 
 /// Points followed through a clip.
