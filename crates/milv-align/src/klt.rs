@@ -138,11 +138,13 @@ impl Pyramid {
     }
 }
 
-/// Where point `p` of frame `a` is in frame `b` (LK window half-width `half`); `None` when
-/// the window leaves the image or has no texture to lock on to in the full image.
-fn lk(a: &Pyramid, b: &Pyramid, p: (f64, f64), half: isize) -> Option<(f64, f64)> {
+/// Where point `p` of frame `a` is in frame `b`, with `window`'s half-width on its levels
+/// of the pyramids; `None` when the window leaves the image or has no texture to lock on to
+/// in the full image.
+fn lk(a: &Pyramid, b: &Pyramid, p: (f64, f64), window: Window) -> Option<(f64, f64)> {
+    let half = window.half;
     let mut g = (0.0f64, 0.0f64);
-    for l in (0..a.levels.len()).rev() {
+    for l in (0..=window.levels.min(a.levels.len() - 1)).rev() {
         let (ia, gx, gy) = &a.levels[l];
         let (ib, _, _) = &b.levels[l];
         let s = f64::from(1u32 << l);
@@ -282,12 +284,16 @@ pub fn hand_tracks(frames: &[Vec<u8>], w: usize, h: usize) -> Option<Vec<Vec<(f6
         return None;
     }
     let mask = motion_mask(frames, w, h);
-    let gray: Vec<Gray> = frames.iter().map(|f| Gray::from_rgb(f, w, h)).collect();
-    let (gx, gy) = gray[0].gradients();
-    let start = corners(&gx, &gy, &mask);
-    let fine = follow(&gray, &start, FINE);
+    // One pyramid per frame serves both windows (the fine one uses its lower levels).
+    let pyr: Vec<Pyramid> = frames
+        .iter()
+        .map(|f| Pyramid::new(Gray::from_rgb(f, w, h), COARSE.levels))
+        .collect();
+    let (_, gx, gy) = &pyr[0].levels[0];
+    let start = corners(gx, gy, &mask);
+    let fine = follow(&pyr, &start, FINE);
     let followed = if fine.hand_lost() {
-        follow(&gray, &start, COARSE)
+        follow(&pyr, &start, COARSE)
     } else {
         fine
     };
@@ -301,21 +307,17 @@ struct Followed {
     alive: Vec<bool>,
 }
 
-/// Follows `start` (points of the first frame) through `gray` with `window`; a point is
-/// lost when LK fails or its forward–backward check misses by [`FB_MAX`].
-fn follow(gray: &[Gray], start: &[(f64, f64)], window: Window) -> Followed {
-    let pyr: Vec<Pyramid> = gray
-        .iter()
-        .map(|g| Pyramid::new(g.clone(), window.levels))
-        .collect();
+/// Follows `start` (points of the first frame) through the frames' pyramids with `window`;
+/// a point is lost when LK fails or its forward–backward check misses by [`FB_MAX`].
+fn follow(pyr: &[Pyramid], start: &[(f64, f64)], window: Window) -> Followed {
     let mut tracks: Vec<Vec<(f64, f64)>> = start.iter().map(|&p| vec![p]).collect();
     let mut alive = vec![true; start.len()];
-    for t in 1..gray.len() {
+    for t in 1..pyr.len() {
         for (k, track) in tracks.iter_mut().enumerate() {
             let p = track[t - 1];
             let next = if alive[k] {
-                lk(&pyr[t - 1], &pyr[t], p, window.half).filter(|&q| {
-                    lk(&pyr[t], &pyr[t - 1], q, window.half)
+                lk(&pyr[t - 1], &pyr[t], p, window).filter(|&q| {
+                    lk(&pyr[t], &pyr[t - 1], q, window)
                         .is_some_and(|back| (back.0 - p.0).hypot(back.1 - p.1) < FB_MAX)
                 })
             } else {
@@ -452,11 +454,11 @@ mod tests {
         let path: Vec<(f64, f64)> = (0..12)
             .map(|t| (30.0 + 4.0 * t as f64, 40.0 + 2.0 * t as f64))
             .collect();
-        let gray: Vec<Gray> = path
+        let pyr: Vec<Pyramid> = path
             .iter()
-            .map(|&(x, y)| Gray::from_rgb(&frame(w, h, x, y), w, h))
+            .map(|&(x, y)| Pyramid::new(Gray::from_rgb(&frame(w, h, x, y), w, h), COARSE.levels))
             .collect();
-        let f = follow(&gray, &[(path[0].0 - 1.0, path[0].1 - 1.0)], COARSE);
+        let f = follow(&pyr, &[(path[0].0 - 1.0, path[0].1 - 1.0)], COARSE);
         assert!(f.alive[0]);
         let end = f.tracks[0][11];
         assert!(
