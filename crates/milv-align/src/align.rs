@@ -278,11 +278,13 @@ impl PairFit<'_> {
 }
 
 /// Aligns one pair's clips with `kind`, or, for a kind that picks per pair
-/// ([`FeatureKind::cascade`]), with the first of its kinds whose cost stays within its
-/// bound and explains the pair ([`PairFit::explained`]); when none does, the first that
+/// ([`FeatureKind::cascade`]), with the first of its stages whose cost stays within its
+/// bound and explains the pair ([`PairFit::explained`]), replaced by its
+/// [`unless_trusted`](crate::features::Stage::unless_trusted) kind's alignment where that
+/// is trusted; when no stage's kind explains the pair within its bound, the first that
 /// explains it, else the last that aligned it at all (so a pair is not flagged for the
-/// sake of a kind that explains it worse). The band's edge plays no part: both kinds
-/// share the band, and a strong warp puts either's path near its edge.
+/// sake of a kind that explains it worse). The band's edge plays no part in the cascade:
+/// both kinds share the band, and a strong warp puts either's path near its edge.
 fn align_pair<'k>(
     kind: &'k dyn FeatureKind,
     human: &Clip,
@@ -294,13 +296,17 @@ fn align_pair<'k>(
         return align_with(kind, human, robot, opts);
     }
     let (mut fits, mut errors) = (Vec::new(), Vec::new());
-    for &(k, keep_below) in cascade {
-        match align_with(k, human, robot, opts) {
-            Ok(fit) if fit.cost_per_dim() <= keep_below && fit.explained(opts.max_cost) => {
-                return Ok(fit);
+    for stage in cascade {
+        match align_with(stage.kind, human, robot, opts) {
+            Ok(fit) if fit.cost_per_dim() <= stage.keep_below && fit.explained(opts.max_cost) => {
+                let better = stage
+                    .unless_trusted
+                    .and_then(|k| align_with(k, human, robot, opts).ok())
+                    .filter(|f| f.trusted(opts.max_cost));
+                return Ok(better.unwrap_or(fit));
             }
             Ok(fit) => fits.push(fit),
-            Err(e) => errors.push(format!("{}: {e}", k.name())),
+            Err(e) => errors.push(format!("{}: {e}", stage.kind.name())),
         }
     }
     match fits.iter().position(|f| f.explained(opts.max_cost)) {
@@ -650,6 +656,7 @@ fn alignment_rows(s: &PairSummary, corr: &Correspondence, features: &str, run_id
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::features::Stage;
 
     #[test]
     fn the_proportional_warp_stretches_one_clip_onto_the_other() {
@@ -703,8 +710,9 @@ mod tests {
     static FARTHER: Offset = offset("farther", 0.3, 0.01);
     static NEAR: Offset = offset("near", 0.01, 0.1);
     static BROKEN: Offset = offset("broken", f64::NAN, 0.1);
+    static EXACT: Offset = offset("exact", 0.0, 0.1);
 
-    struct Cascade(&'static [(&'static dyn FeatureKind, f64)]);
+    struct Cascade(&'static [Stage]);
 
     impl FeatureKind for Cascade {
         fn name(&self) -> &'static str {
@@ -713,14 +721,31 @@ mod tests {
         fn extract(&self, _: &Clip) -> Result<crate::Features> {
             unreachable!("a cascade extracts through its kinds")
         }
-        fn cascade(&self) -> &'static [(&'static dyn FeatureKind, f64)] {
+        fn cascade(&self) -> &'static [Stage] {
             self.0
         }
     }
 
     fn picked(cascade: &[(&'static dyn FeatureKind, f64)]) -> std::result::Result<&'static str, String> {
+        picked_unless(cascade, None)
+    }
+
+    /// The kind `auto`-like stages pick, the first stage replaced by `unless` where trusted.
+    fn picked_unless(
+        cascade: &[(&'static dyn FeatureKind, f64)],
+        unless: Option<&'static dyn FeatureKind>,
+    ) -> std::result::Result<&'static str, String> {
         // A kind's cascade is static; a test's may leak.
-        let cascade = Box::leak(cascade.to_vec().into_boxed_slice());
+        let stages: Vec<Stage> = cascade
+            .iter()
+            .enumerate()
+            .map(|(i, &(kind, keep_below))| Stage {
+                kind,
+                keep_below,
+                unless_trusted: if i == 0 { unless } else { None },
+            })
+            .collect();
+        let cascade = Box::leak(stages.into_boxed_slice());
         let clip = |domain, n| Clip {
             episode_id: format!("{domain:?}"),
             domain,
@@ -757,5 +782,17 @@ mod tests {
             picked(&[(&BROKEN, 0.01), (&BROKEN, 0.01)]),
             Err("broken: broken cannot; broken: broken cannot".to_string())
         );
+    }
+
+    #[test]
+    fn a_kept_stage_gives_way_to_its_unless_kind_only_where_that_is_trusted() {
+        let cascade: &[(&'static dyn FeatureKind, f64)] = &[(&NEAR, 0.01), (&FAR, f64::INFINITY)];
+        assert_eq!(picked_unless(cascade, Some(&EXACT)), Ok("exact"));
+        // Not trusted (cost ≈ 0.02 above its 0.01), or cannot align: the stage's own.
+        assert_eq!(picked_unless(cascade, Some(&FAR_UNTRUSTED)), Ok("near"));
+        assert_eq!(picked_unless(cascade, Some(&BROKEN)), Ok("near"));
+        // Only a kept stage is replaced: past its bound, the next stage decides.
+        let past: &[(&'static dyn FeatureKind, f64)] = &[(&FAR, 0.01), (&NEAR, f64::INFINITY)];
+        assert_eq!(picked_unless(past, Some(&EXACT)), Ok("near"));
     }
 }

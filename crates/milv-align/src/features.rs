@@ -120,13 +120,24 @@ pub trait FeatureKind: Sync {
         robot
     }
 
-    /// For a kind that picks other kinds per pair: those kinds in order, each with the
-    /// cost per dimension up to which its alignment is kept when also within the kind's
-    /// own [`untrusted_cost`](Self::untrusted_cost) (else the next is tried). Empty for a
+    /// For a kind that picks other kinds per pair: its [`Stage`]s in order. Empty for a
     /// kind that describes frames itself.
-    fn cascade(&self) -> &'static [(&'static dyn FeatureKind, f64)] {
+    fn cascade(&self) -> &'static [Stage] {
         &[]
     }
+}
+
+/// One step of a kind that picks other kinds per pair ([`FeatureKind::cascade`]).
+pub struct Stage {
+    pub kind: &'static dyn FeatureKind,
+    /// Cost per dimension up to which `kind`'s alignment is kept when also within the
+    /// kind's own [`untrusted_cost`](FeatureKind::untrusted_cost) (else the next stage is
+    /// tried).
+    pub keep_below: f64,
+    /// A kind whose alignment replaces the kept one where it is trusted (cost and band
+    /// edge, [`PairFit::trusted`](crate::align::PairFit::trusted)); one that cannot align
+    /// the pair leaves it.
+    pub unless_trusted: Option<&'static dyn FeatureKind>,
 }
 
 /// The DTW a pair is aligned with (its band and step pattern), as the robot frame of
@@ -321,7 +332,7 @@ impl FeatureKind for Translated {
 }
 
 /// `auto`: [`Motion`] where its model of the scene explains the pair, [`Track`]
-/// elsewhere.
+/// elsewhere; and where motion explains it, [`HandTrack`] when that is trusted.
 ///
 /// Motion's table-plane features cost at most 0.0018 per dimension on true milv-sim pairs
 /// (median 0.0002) and at least 0.0015 on the MuJoCo set's (median 0.0035), where the
@@ -331,7 +342,16 @@ impl FeatureKind for Translated {
 /// motion's cost is within motion's trust bound and track's is not (a true milv-sim pair is
 /// not newly flagged), and when track cannot align it, e.g. without robot states.
 ///
+/// Where motion explains the pair, its tip (from frame differences) is where the scene
+/// model says the hand is, and its progress carries each embodiment's own lead (a hand's
+/// fingertips, a gripper's fingers) as a phase-dependent bias. `track` maps the robot's
+/// own states instead and is better there, but only when its points are on the hand:
+/// [`HandTrack`] refuses clips whose points travel less than motion's tip (points on a
+/// pushed object or where the arm leaves the picture), and its trusted alignment replaces
+/// motion's (BENCHMARKS.md, "Track where motion's tip vouches for its points").
+///
 /// [`Track`]: crate::track::Track
+/// [`HandTrack`]: crate::track::HandTrack
 pub struct Auto;
 
 /// Motion's cost per dimension above which `auto` turns to track: between the design
@@ -350,8 +370,19 @@ impl FeatureKind for Auto {
         )))
     }
 
-    fn cascade(&self) -> &'static [(&'static dyn FeatureKind, f64)] {
-        &[(&Motion, AUTO_MOTION_COST), (&crate::track::Track, f64::INFINITY)]
+    fn cascade(&self) -> &'static [Stage] {
+        &[
+            Stage {
+                kind: &Motion,
+                keep_below: AUTO_MOTION_COST,
+                unless_trusted: Some(&crate::track::HandTrack),
+            },
+            Stage {
+                kind: &crate::track::Track,
+                keep_below: f64::INFINITY,
+                unless_trusted: None,
+            },
+        ]
     }
 }
 

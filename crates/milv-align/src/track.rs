@@ -51,7 +51,7 @@ impl FeatureKind for Track {
 
     fn extract(&self, clip: &Clip) -> Result<Features, Error> {
         match clip.domain {
-            milv_data::Domain::Human => human_features(clip),
+            milv_data::Domain::Human => human_features(clip, false),
             milv_data::Domain::Robot => robot_states(clip),
         }
     }
@@ -88,6 +88,37 @@ impl FeatureKind for Track {
             return robot;
         };
         fit.features
+    }
+}
+
+/// `track` only where its points are on the hand, for `auto` where motion's scene model
+/// explains the pair ([`crate::features::Auto`]): a human clip is refused when no point
+/// survives or the farthest-travelled point travels less than the tip found from frame
+/// differences ([`motion::TipTracker`]). A point on the hand goes as far as that tip (on
+/// milv-sim's drawing, 0.94–1.40× over 60 clips); points on a pushed object, which only
+/// moves in the push, or where the arm leaves the picture, go less far (pushing: 0.03–0.99×).
+/// The tip itself is only a fair yardstick where motion explains the pair: on the MuJoCo
+/// set's textured scenes it jitters, and hand points travel 0.2–2× as far.
+pub struct HandTrack;
+
+impl FeatureKind for HandTrack {
+    fn name(&self) -> &'static str {
+        Track.name()
+    }
+
+    fn untrusted_cost(&self) -> f64 {
+        Track.untrusted_cost()
+    }
+
+    fn extract(&self, clip: &Clip) -> Result<Features, Error> {
+        match clip.domain {
+            milv_data::Domain::Human => human_features(clip, true),
+            milv_data::Domain::Robot => robot_states(clip),
+        }
+    }
+
+    fn fit_pair(&self, human: &Features, robot: Features, align: &Aligner) -> Features {
+        Track.fit_pair(human, robot, align)
     }
 }
 
@@ -132,38 +163,61 @@ fn alternate(
     out
 }
 
-/// The human clip's tracked points as `[progress, x₁, y₁, …]`.
-fn human_features(clip: &Clip) -> Result<Features, Error> {
+/// The human clip's tracked points as `[progress, x₁, y₁, …]`; with `hand_only`, refused
+/// unless the points travel as far as the frame-difference tip ([`HandTrack`]).
+fn human_features(clip: &Clip, hand_only: bool) -> Result<Features, Error> {
     let (frames, w, h) = clip.all_rgb()?;
     let n = frames.len();
-    // Untextured, flat-shaded arms (milv-sim's) give the point tracker nothing to hold:
-    // then the tip found from frame differences stands in, in image coordinates.
-    let tracks = match klt::hand_tracks(&frames, w, h) {
-        Some(t) => t,
-        None => {
-            let mut tips = motion::TipTracker::new(w, h, n);
-            for f in frames {
-                tips.push(f);
-            }
-            let tip = tips.finish().ok_or_else(|| {
-                Error::Invalid(format!(
-                    "episode {}: nothing moves in the clip (track features need a moving arm)",
+    let clean = |v: Vec<f64>| motion::gaussian_filter(&motion::median_filter(&v, 5), 1.5);
+    let cleaned = |track: &[(f64, f64)]| -> (Vec<f64>, Vec<f64>) {
+        (
+            clean(track.iter().map(|p| p.0).collect()),
+            clean(track.iter().map(|p| p.1).collect()),
+        )
+    };
+    let travel = |(x, y): &(Vec<f64>, Vec<f64>)| -> f64 {
+        (1..x.len())
+            .map(|t| (x[t] - x[t - 1]).hypot(y[t] - y[t - 1]))
+            .sum()
+    };
+    let points = klt::hand_tracks(&frames, w, h);
+    let tip = || {
+        let mut tips = motion::TipTracker::new(w, h, n);
+        for f in &frames {
+            tips.push(f.clone());
+        }
+        tips.finish().map(|t| t.tips).ok_or_else(|| {
+            Error::Invalid(format!(
+                "episode {}: nothing moves in the clip (track features need a moving arm)",
+                clip.episode_id
+            ))
+        })
+    };
+    let tracks = match (points, hand_only) {
+        (Some(p), false) => p,
+        // Untextured, flat-shaded arms (milv-sim's) may give the point tracker nothing to
+        // hold: then the tip found from frame differences stands in, in image coordinates.
+        (None, false) => vec![tip()?],
+        (Some(p), true) => {
+            let farthest = p.iter().map(|t| travel(&cleaned(t))).fold(0.0, f64::max);
+            let tip_travel = travel(&cleaned(&tip()?));
+            if farthest < tip_travel {
+                return Err(Error::Invalid(format!(
+                    "episode {}: the tracked points travel {farthest:.0} px, less than the moving \
+                     region's tip ({tip_travel:.0} px): they are not on the hand",
                     clip.episode_id
-                ))
-            })?;
-            vec![tip.tips]
+                )));
+            }
+            p
+        }
+        (None, true) => {
+            return Err(Error::Invalid(format!(
+                "episode {}: no tracked point survives the clip",
+                clip.episode_id
+            )));
         }
     };
-    let clean = |v: Vec<f64>| motion::gaussian_filter(&motion::median_filter(&v, 5), 1.5);
-    let cleaned: Vec<(Vec<f64>, Vec<f64>)> = tracks
-        .iter()
-        .map(|t| {
-            (
-                clean(t.iter().map(|p| p.0).collect()),
-                clean(t.iter().map(|p| p.1).collect()),
-            )
-        })
-        .collect();
+    let cleaned: Vec<(Vec<f64>, Vec<f64>)> = tracks.iter().map(|t| cleaned(t)).collect();
     let rows: Vec<Vec<f64>> = (0..n)
         .map(|t| cleaned.iter().flat_map(|(x, y)| [x[t], y[t]]).collect())
         .collect();
@@ -414,5 +468,37 @@ mod tests {
         };
         let e = Track.extract(&clip).unwrap_err().to_string();
         assert!(e.contains("r7") && e.contains("no state vectors"), "{e}");
+    }
+
+    #[test]
+    fn hand_track_refuses_a_clip_without_tracked_points_where_track_falls_back() {
+        let still: Vec<Vec<u8>> = (0..6)
+            .map(|_| {
+                let mut png = Vec::new();
+                milv_data::frame_codec::encode(
+                    milv_data::frame_codec::FrameEncoding::Png,
+                    &vec![120u8; 16 * 16 * 3],
+                    16,
+                    16,
+                    &mut png,
+                )
+                .unwrap();
+                png
+            })
+            .collect();
+        let clip = Clip {
+            episode_id: "h3".into(),
+            domain: milv_data::Domain::Human,
+            encoding: milv_data::frame_codec::FrameEncoding::Png,
+            width: 16,
+            height: 16,
+            images: still,
+            states: None,
+        };
+        let e = HandTrack.extract(&clip).unwrap_err().to_string();
+        assert!(e.contains("h3") && e.contains("no tracked point"), "{e}");
+        // Plain track falls back to the frame-difference tip, which finds nothing moving.
+        let e = Track.extract(&clip).unwrap_err().to_string();
+        assert!(e.contains("nothing moves"), "{e}");
     }
 }
