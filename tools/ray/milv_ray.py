@@ -68,8 +68,10 @@ def run_partition(cmd: list[str], env: dict[str, str], part: int, fail_once: str
     proc = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     if fail_once and not retried:
         # Fault injection for tests: the first attempt of this partition dies mid-run
-        # (its MILV process is SIGKILLed, then the Ray worker process itself exits).
-        time.sleep(float(os.environ.get("MILV_RAY_FAIL_AFTER_S", "0.5")))
+        # (its MILV process is SIGKILLed, then the Ray worker process itself exits). It is
+        # stopped at once, so a fast worker cannot finish before the kill (a timed kill
+        # missed workers that finished in under 0.3 s).
+        proc.send_signal(signal.SIGSTOP)
         # Whether the kill really hit a running worker (it had not finished yet).
         Path(fail_once).write_text(json.dumps({"killed_running": proc.poll() is None}))
         proc.send_signal(signal.SIGKILL)
