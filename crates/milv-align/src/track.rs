@@ -13,7 +13,7 @@
 //!
 //! * human clip: the [`klt::TOP_POINTS`] most travelled points of [`klt::hand_tracks`]
 //!   (or, when no point survives, the tip from frame differences of
-//!   [`motion::TipTracker`]), each cleaned (5-frame median, Gaussian σ = 1.5 frames),
+//!   [`motion::TipTracker`]), each cleaned (3-frame median, Gaussian σ = 0.75 frames),
 //!   centred and scaled together; features `[progress, x₁, y₁, …, x_K, y_K]`, progress
 //!   along the path of the points' per-frame median.
 //! * robot clip: its state vectors (any width: 3-D end-effector positions, or milv-sim's
@@ -168,7 +168,10 @@ fn alternate(
 fn human_features(clip: &Clip, hand_only: bool) -> Result<Features, Error> {
     let (frames, w, h) = clip.all_rgb()?;
     let n = frames.len();
-    let clean = |v: Vec<f64>| motion::gaussian_filter(&motion::median_filter(&v, 5), 1.5);
+    // Light cleaning only: the robot's states are not smoothed, so smoothing just the human
+    // side erases wiggles of the path that the states keep (5-frame median and σ = 1.5
+    // before; BENCHMARKS.md, "Lighter cleaning of the human points").
+    let clean = |v: Vec<f64>| motion::gaussian_filter(&motion::median_filter(&v, 3), 0.75);
     let cleaned = |track: &[(f64, f64)]| -> (Vec<f64>, Vec<f64>) {
         (
             clean(track.iter().map(|p| p.0).collect()),
