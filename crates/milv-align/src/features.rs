@@ -22,6 +22,9 @@ pub struct Clip {
     pub height: u32,
     pub images: Vec<Vec<u8>>,
     pub states: Option<Vec<Vec<f32>>>,
+    /// The frame-difference tip per frame, once found ([`Clip::tips`]): `auto` needs it for
+    /// motion and again as [`crate::track::HandTrack`]'s yardstick on the same clip.
+    pub(crate) tip_cache: std::sync::OnceLock<Option<Vec<(f64, f64)>>>,
 }
 
 impl Clip {
@@ -63,6 +66,20 @@ impl Clip {
         let (w, h) =
             size.ok_or_else(|| Error::Invalid(format!("episode {} has no frames", self.episode_id)))?;
         Ok((frames, w, h))
+    }
+
+    /// The tip found from frame differences in every frame ([`motion::TipTracker`]) of
+    /// this clip, decoded as `frames`, unless already found; `None` when nothing moves.
+    pub fn tips(&self, frames: &[Vec<u8>], w: usize, h: usize) -> Option<&[(f64, f64)]> {
+        self.tip_cache
+            .get_or_init(|| {
+                let mut tracker = motion::TipTracker::new(w, h, frames.len());
+                for f in frames {
+                    tracker.push(f.clone());
+                }
+                tracker.finish().map(|t| t.tips)
+            })
+            .as_deref()
     }
 
     /// The state vectors as rows of one width; `hint` says what to use instead.
@@ -209,7 +226,9 @@ impl FeatureKind for Motion {
         for f in frames {
             tracker.push(f);
         }
-        let track = tracker.finish().ok_or_else(|| {
+        let track = tracker.finish();
+        let _ = clip.tip_cache.set(track.as_ref().map(|t| t.tips.clone()));
+        let track = track.ok_or_else(|| {
             Error::Invalid(format!(
                 "episode {}: nothing moves in the clip (motion features need a moving arm)",
                 clip.episode_id
@@ -437,6 +456,7 @@ mod tests {
             height: h as u32,
             images,
             states: None,
+            tip_cache: Default::default(),
         }
     }
 
@@ -483,6 +503,22 @@ mod tests {
                 .to_string()
                 .contains("nothing moves")
         );
+    }
+
+    #[test]
+    fn motion_leaves_the_clips_tips_for_the_next_kind() {
+        let pace: Vec<f64> = (0..12).map(|t| t as f64 / 11.0).collect();
+        let reach: Vec<f64> = pace.iter().map(|&p| 0.2 + 0.6 * p).collect();
+        let c = clip(0, &reach, &[0.4; 12]);
+        let (frames, w, h) = c.all_rgb().unwrap();
+        let fresh = clip(0, &reach, &[0.4; 12]).tips(&frames, w, h).unwrap().to_vec();
+        assert!(c.tip_cache.get().is_none());
+        Motion.extract(&c).unwrap();
+        assert_eq!(c.tip_cache.get().unwrap().as_deref(), Some(&fresh[..]));
+        // Found once: other frames passed later do not change it.
+        assert_eq!(c.tips(&frames[..2], w, h), Some(&fresh[..]));
+        // The tip follows the bar's end upwards (y falls as it reaches in).
+        assert!(fresh[11].1 < fresh[0].1 - 10.0, "{fresh:?}");
     }
 
     #[test]

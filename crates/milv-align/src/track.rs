@@ -185,11 +185,7 @@ fn human_features(clip: &Clip, hand_only: bool) -> Result<Features, Error> {
     };
     let points = klt::hand_tracks(&frames, w, h);
     let tip = || {
-        let mut tips = motion::TipTracker::new(w, h, n);
-        for f in &frames {
-            tips.push(f.clone());
-        }
-        tips.finish().map(|t| t.tips).ok_or_else(|| {
+        clip.tips(&frames, w, h).map(<[_]>::to_vec).ok_or_else(|| {
             Error::Invalid(format!(
                 "episode {}: nothing moves in the clip (track features need a moving arm)",
                 clip.episode_id
@@ -468,6 +464,7 @@ mod tests {
             height: 4,
             images: vec![],
             states: None,
+            tip_cache: Default::default(),
         };
         let e = Track.extract(&clip).unwrap_err().to_string();
         assert!(e.contains("r7") && e.contains("no state vectors"), "{e}");
@@ -497,6 +494,7 @@ mod tests {
             height: 16,
             images: still,
             states: None,
+            tip_cache: Default::default(),
         };
         let e = HandTrack.extract(&clip).unwrap_err().to_string();
         assert!(e.contains("h3") && e.contains("no tracked point"), "{e}");
