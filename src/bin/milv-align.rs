@@ -56,7 +56,9 @@ struct RunArgs {
 struct Common {
     /// auto (default): motion for each pair whose motion cost says the table-plane model
     /// fits (milv-sim-like scenes), else track (robot clips with states), unless only
-    /// motion's cost is within its trust bound; where motion fits, track instead when its
+    /// motion's cost is within its trust bound or the human clip's tracked points travel
+    /// less than a tenth as far as motion's tip (a pushed object, not the hand: motion's
+    /// alignment is kept, flagged if untrusted); where motion fits, track instead when its
     /// alignment is trusted and its points travel as far as motion's tip (they are on the
     /// hand); the report names the kind used per pair;
     /// motion: progress and heading of the arm's tip, tracked from frame differences and

@@ -351,7 +351,8 @@ impl FeatureKind for Translated {
 }
 
 /// `auto`: [`Motion`] where its model of the scene explains the pair, [`Track`]
-/// elsewhere; and where motion explains it, [`HandTrack`] when that is trusted.
+/// elsewhere (where its points move at all); and where motion explains it, track where its
+/// points are on the hand and its alignment is trusted.
 ///
 /// Motion's table-plane features cost at most 0.0018 per dimension on true milv-sim pairs
 /// (median 0.0002) and at least 0.0015 on the MuJoCo set's (median 0.0035), where the
@@ -359,18 +360,21 @@ impl FeatureKind for Translated {
 /// states and is worse than motion on milv-sim's pushing. So a pair whose motion cost is
 /// above [`AUTO_MOTION_COST`] is re-aligned on track; it keeps motion's alignment when
 /// motion's cost is within motion's trust bound and track's is not (a true milv-sim pair is
-/// not newly flagged), and when track cannot align it, e.g. without robot states.
+/// not newly flagged), and when track cannot align it: without robot states, or when the
+/// human clip's tracked points barely move ([`HandTrack::MOVING`]: they are on a pushed
+/// object, and track would follow it; BENCHMARKS.md, "Track's points must move").
 ///
 /// Where motion explains the pair, its tip (from frame differences) is where the scene
 /// model says the hand is, and its progress carries each embodiment's own lead (a hand's
 /// fingertips, a gripper's fingers) as a phase-dependent bias. `track` maps the robot's
 /// own states instead and is better there, but only when its points are on the hand:
-/// [`HandTrack`] refuses clips whose points travel less than motion's tip (points on a
+/// [`HandTrack::ON_HAND`] refuses clips whose points travel less than motion's tip (points on a
 /// pushed object or where the arm leaves the picture), and its trusted alignment replaces
 /// motion's (BENCHMARKS.md, "Track where motion's tip vouches for its points").
 ///
 /// [`Track`]: crate::track::Track
-/// [`HandTrack`]: crate::track::HandTrack
+/// [`HandTrack::MOVING`]: crate::track::HandTrack::MOVING
+/// [`HandTrack::ON_HAND`]: crate::track::HandTrack::ON_HAND
 pub struct Auto;
 
 /// Motion's cost per dimension above which `auto` turns to track: between the design
@@ -394,10 +398,10 @@ impl FeatureKind for Auto {
             Stage {
                 kind: &Motion,
                 keep_below: AUTO_MOTION_COST,
-                unless_trusted: Some(&crate::track::HandTrack),
+                unless_trusted: Some(&crate::track::HandTrack::ON_HAND),
             },
             Stage {
-                kind: &crate::track::Track,
+                kind: &crate::track::HandTrack::MOVING,
                 keep_below: f64::INFINITY,
                 unless_trusted: None,
             },

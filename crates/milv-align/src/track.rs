@@ -51,7 +51,7 @@ impl FeatureKind for Track {
 
     fn extract(&self, clip: &Clip) -> Result<Features, Error> {
         match clip.domain {
-            milv_data::Domain::Human => human_features(clip, false),
+            milv_data::Domain::Human => human_features(clip, None),
             milv_data::Domain::Robot => robot_states(clip),
         }
     }
@@ -91,15 +91,42 @@ impl FeatureKind for Track {
     }
 }
 
-/// `track` only where its points are on the hand, for `auto` where motion's scene model
-/// explains the pair ([`crate::features::Auto`]): a human clip is refused when no point
-/// survives or the farthest-travelled point travels less than the tip found from frame
-/// differences ([`motion::TipTracker`]). A point on the hand goes as far as that tip (on
-/// milv-sim's drawing, 0.94–1.40× over 60 clips); points on a pushed object, which only
-/// moves in the push, or where the arm leaves the picture, go less far (pushing: 0.03–0.99×).
-/// The tip itself is only a fair yardstick where motion explains the pair: on the MuJoCo
-/// set's textured scenes it jitters, and hand points travel 0.2–2× as far.
-pub struct HandTrack;
+/// `track` refused for a human clip whose tracked points do not move with the hand, for
+/// `auto` ([`crate::features::Auto`]), judged against the tip found from frame
+/// differences ([`motion::TipTracker`]): the farthest-travelled point must travel at
+/// least [`min_travel`](Self::min_travel) times as far as that tip.
+///
+/// * [`HandTrack::ON_HAND`] (1×, and no tip standing in for points): where motion explains
+///   the pair, its trusted alignment replaces motion's. A point on the hand goes as far as
+///   the tip (on milv-sim's drawing, 0.94–1.40× over 60 clips); points on a pushed object,
+///   which only moves in the push, or where the arm leaves the picture, go less far
+///   (pushing: 0.03–0.99×). The tip is only a fair yardstick this strict where motion
+///   explains the pair: on the MuJoCo set's textured scenes it jitters, and hand points
+///   travel 0.16–2× as far.
+/// * [`HandTrack::MOVING`] (0.1×): where motion does not explain the pair and `auto` falls
+///   back to track. Points that travel less than a tenth of the tip's path sit on what
+///   barely moves (a pushed object: milv-sim pushing clips down to 0.03×), so track's
+///   alignment would follow the wrong thing; no clip of the MuJoCo set's six seeds is below
+///   0.16× (BENCHMARKS.md, "Track's points must move").
+pub struct HandTrack {
+    /// Least travel of the farthest-travelled point, as a fraction of the tip's.
+    pub min_travel: f64,
+    /// Whether the tip stands in when no tracked point survives (as in [`Track`]).
+    pub tip_stands_in: bool,
+}
+
+impl HandTrack {
+    /// Points on the hand: as far as the tip.
+    pub const ON_HAND: HandTrack = HandTrack {
+        min_travel: 1.0,
+        tip_stands_in: false,
+    };
+    /// Points that move at all: a tenth of the tip's path.
+    pub const MOVING: HandTrack = HandTrack {
+        min_travel: 0.1,
+        tip_stands_in: true,
+    };
+}
 
 impl FeatureKind for HandTrack {
     fn name(&self) -> &'static str {
@@ -112,7 +139,7 @@ impl FeatureKind for HandTrack {
 
     fn extract(&self, clip: &Clip) -> Result<Features, Error> {
         match clip.domain {
-            milv_data::Domain::Human => human_features(clip, true),
+            milv_data::Domain::Human => human_features(clip, Some(self)),
             milv_data::Domain::Robot => robot_states(clip),
         }
     }
@@ -163,26 +190,11 @@ fn alternate(
     out
 }
 
-/// The human clip's tracked points as `[progress, x₁, y₁, …]`; with `hand_only`, refused
-/// unless the points travel as far as the frame-difference tip ([`HandTrack`]).
-fn human_features(clip: &Clip, hand_only: bool) -> Result<Features, Error> {
+/// The human clip's tracked points as `[progress, x₁, y₁, …]`; with a [`HandTrack`]
+/// yardstick, refused unless the points travel far enough against the frame-difference tip.
+fn human_features(clip: &Clip, yardstick: Option<&HandTrack>) -> Result<Features, Error> {
     let (frames, w, h) = clip.all_rgb()?;
     let n = frames.len();
-    // Light cleaning only: the robot's states are not smoothed, so smoothing just the human
-    // side erases wiggles of the path that the states keep (5-frame median and σ = 1.5
-    // before; BENCHMARKS.md, "Lighter cleaning of the human points").
-    let clean = |v: Vec<f64>| motion::gaussian_filter(&motion::median_filter(&v, 3), 0.75);
-    let cleaned = |track: &[(f64, f64)]| -> (Vec<f64>, Vec<f64>) {
-        (
-            clean(track.iter().map(|p| p.0).collect()),
-            clean(track.iter().map(|p| p.1).collect()),
-        )
-    };
-    let travel = |(x, y): &(Vec<f64>, Vec<f64>)| -> f64 {
-        (1..x.len())
-            .map(|t| (x[t] - x[t - 1]).hypot(y[t] - y[t - 1]))
-            .sum()
-    };
     let points = klt::hand_tracks(&frames, w, h);
     let tip = || {
         clip.tips(&frames, w, h).map(<[_]>::to_vec).ok_or_else(|| {
@@ -192,24 +204,18 @@ fn human_features(clip: &Clip, hand_only: bool) -> Result<Features, Error> {
             ))
         })
     };
-    let tracks = match (points, hand_only) {
-        (Some(p), false) => p,
+    let tracks = match (points, yardstick) {
+        (Some(p), None) => p,
         // Untextured, flat-shaded arms (milv-sim's) may give the point tracker nothing to
         // hold: then the tip found from frame differences stands in, in image coordinates.
-        (None, false) => vec![tip()?],
-        (Some(p), true) => {
-            let farthest = p.iter().map(|t| travel(&cleaned(t))).fold(0.0, f64::max);
-            let tip_travel = travel(&cleaned(&tip()?));
-            if farthest < tip_travel {
-                return Err(Error::Invalid(format!(
-                    "episode {}: the tracked points travel {farthest:.0} px, less than the moving \
-                     region's tip ({tip_travel:.0} px): they are not on the hand",
-                    clip.episode_id
-                )));
-            }
+        (None, None) => vec![tip()?],
+        (None, Some(y)) if y.tip_stands_in => vec![tip()?],
+        (Some(p), Some(y)) => {
+            y.check(&p, &tip()?)
+                .map_err(|m| Error::Invalid(format!("episode {}: {m}", clip.episode_id)))?;
             p
         }
-        (None, true) => {
+        (None, Some(_)) => {
             return Err(Error::Invalid(format!(
                 "episode {}: no tracked point survives the clip",
                 clip.episode_id
@@ -221,6 +227,40 @@ fn human_features(clip: &Clip, hand_only: bool) -> Result<Features, Error> {
         .map(|t| cleaned.iter().flat_map(|(x, y)| [x[t], y[t]]).collect())
         .collect();
     features_of(&standardized(&rows))
+}
+
+/// One image track's x and y, cleaned lightly: the robot's states are not smoothed, so
+/// smoothing just the human side erases wiggles of the path that the states keep (5-frame
+/// median and σ = 1.5 before; BENCHMARKS.md, "Lighter cleaning of the human points").
+fn cleaned(track: &[(f64, f64)]) -> (Vec<f64>, Vec<f64>) {
+    let clean = |v: Vec<f64>| motion::gaussian_filter(&motion::median_filter(&v, 3), 0.75);
+    (
+        clean(track.iter().map(|p| p.0).collect()),
+        clean(track.iter().map(|p| p.1).collect()),
+    )
+}
+
+/// Length of a cleaned track's path.
+fn travel((x, y): &(Vec<f64>, Vec<f64>)) -> f64 {
+    (1..x.len())
+        .map(|t| (x[t] - x[t - 1]).hypot(y[t] - y[t - 1]))
+        .sum()
+}
+
+impl HandTrack {
+    /// Why tracked `points` fail this yardstick against the frame-difference `tip`, if they do.
+    fn check(&self, points: &[Vec<(f64, f64)>], tip: &[(f64, f64)]) -> std::result::Result<(), String> {
+        let farthest = points.iter().map(|t| travel(&cleaned(t))).fold(0.0, f64::max);
+        let tip_travel = travel(&cleaned(tip));
+        if farthest < self.min_travel * tip_travel {
+            return Err(format!(
+                "the tracked points travel {farthest:.0} px, less than {}× the moving region's \
+                 tip ({tip_travel:.0} px): they do not move with the hand",
+                self.min_travel
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// The robot clip's states, centred and scaled (one scale for all columns, so the path's
@@ -496,10 +536,37 @@ mod tests {
             states: None,
             tip_cache: Default::default(),
         };
-        let e = HandTrack.extract(&clip).unwrap_err().to_string();
+        let e = HandTrack::ON_HAND.extract(&clip).unwrap_err().to_string();
         assert!(e.contains("h3") && e.contains("no tracked point"), "{e}");
-        // Plain track falls back to the frame-difference tip, which finds nothing moving.
-        let e = Track.extract(&clip).unwrap_err().to_string();
-        assert!(e.contains("nothing moves"), "{e}");
+        // Plain track, and auto's fallback to it, fall back to the frame-difference tip, which finds nothing moving.
+        for e in [Track.extract(&clip), HandTrack::MOVING.extract(&clip)] {
+            let e = e.unwrap_err().to_string();
+            assert!(e.contains("nothing moves"), "{e}");
+        }
+    }
+
+    #[test]
+    fn the_yardsticks_refuse_points_that_travel_less_than_their_share_of_the_tip() {
+        // The tip sweeps 60 px; points that sweep `px` along with it.
+        let sweep =
+            |px: f64| -> Vec<(f64, f64)> { (0..30).map(|t| (10.0 + px * t as f64 / 29.0, 20.0)).collect() };
+        let tip = sweep(60.0);
+        let (object, wrist, hand) = (
+            vec![sweep(3.0), sweep(1.0)],
+            vec![sweep(30.0)],
+            vec![sweep(66.0), sweep(3.0)],
+        );
+        // A pushed object's points (5 % of the tip's path) fail both.
+        let e = HandTrack::MOVING.check(&object, &tip).unwrap_err();
+        assert!(
+            e.contains("travel 3 px") && e.contains("0.1×") && e.contains("tip (59 px)"),
+            "{e}"
+        );
+        assert!(HandTrack::ON_HAND.check(&object, &tip).is_err());
+        // Half the tip's path moves, but does not vouch for being on the hand.
+        assert!(HandTrack::MOVING.check(&wrist, &tip).is_ok());
+        assert!(HandTrack::ON_HAND.check(&wrist, &tip).is_err());
+        // The farthest point counts: one on the hand is enough.
+        assert!(HandTrack::ON_HAND.check(&hand, &tip).is_ok());
     }
 }
