@@ -59,7 +59,7 @@ struct Common {
     /// motion's cost is within its trust bound or the human clip's tracked points travel
     /// less than a tenth as far as motion's tip (a pushed object, not the hand: motion's
     /// alignment is kept, flagged if untrusted); where motion fits, track instead when its
-    /// alignment is trusted and its points travel as far as motion's tip (they are on the
+    /// path stays off the band's edge and its points travel as far as motion's tip (on the
     /// hand); the report names the kind used per pair;
     /// motion: progress and heading of the arm's tip, tracked from frame differences and
     /// mapped onto the table plane (any clip); track: the human's hand followed by image
@@ -81,7 +81,8 @@ struct Common {
     model_id: Option<String>,
     /// Pairs above this normalised cost per feature dimension are flagged untrusted
     /// (default per feature kind: motion 0.002, track 0.01, state 0.002, translated 0.5;
-    /// auto: that of the kind it picked for the pair).
+    /// auto: that of the kind it picked for the pair, and none for track where it replaced
+    /// motion, whose cost vouched for the pair).
     #[arg(long)]
     max_cost: Option<f64>,
     /// Each frame's partner is its median over all warping paths in the band, weighted

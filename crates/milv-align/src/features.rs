@@ -352,7 +352,7 @@ impl FeatureKind for Translated {
 
 /// `auto`: [`Motion`] where its model of the scene explains the pair, [`Track`]
 /// elsewhere (where its points move at all); and where motion explains it, track where its
-/// points are on the hand and its alignment is trusted.
+/// points are on the hand and its path stays off the band's edge.
 ///
 /// Motion's table-plane features cost at most 0.0018 per dimension on true milv-sim pairs
 /// (median 0.0002) and at least 0.0015 on the MuJoCo set's (median 0.0035), where the
@@ -369,8 +369,10 @@ impl FeatureKind for Translated {
 /// fingertips, a gripper's fingers) as a phase-dependent bias. `track` maps the robot's
 /// own states instead and is better there, but only when its points are on the hand:
 /// [`HandTrack::ON_HAND`] refuses clips whose points travel less than motion's tip (points on a
-/// pushed object or where the arm leaves the picture), and its trusted alignment replaces
-/// motion's (BENCHMARKS.md, "Track where motion's tip vouches for its points").
+/// pushed object or where the arm leaves the picture), and its alignment replaces motion's
+/// where its path stays off the band's edge, whatever track's own cost (motion's has
+/// vouched for the pair; BENCHMARKS.md, "Track where motion's tip vouches for its points"
+/// and "Where the tip vouches, track's cost does not veto").
 ///
 /// [`Track`]: crate::track::Track
 /// [`HandTrack::MOVING`]: crate::track::HandTrack::MOVING

@@ -30,6 +30,11 @@ use crate::{Error, klt, motion};
 
 pub struct Track;
 
+/// `track`'s trust bound (cost per dimension). MuJoCo design seeds 1+2: every pair above
+/// this was off, none trusted below it was worse than proportional; held-out seeds overlap
+/// (BENCHMARKS.md).
+pub const TRACK_MAX_COST: f64 = 0.01;
+
 /// Most alternations of fitting the camera and re-aligning (most pairs settle in < 10).
 pub const ROUNDS: usize = 20;
 /// Weight of progress against the position columns (which weigh as much as one point).
@@ -44,9 +49,7 @@ impl FeatureKind for Track {
     }
 
     fn untrusted_cost(&self) -> f64 {
-        // MuJoCo design seeds 1+2: every pair above this was off, none trusted below it was
-        // worse than proportional; held-out seeds overlap (BENCHMARKS.md).
-        0.01
+        TRACK_MAX_COST
     }
 
     fn extract(&self, clip: &Clip) -> Result<Features, Error> {
@@ -97,7 +100,11 @@ impl FeatureKind for Track {
 /// least [`min_travel`](Self::min_travel) times as far as that tip.
 ///
 /// * [`HandTrack::ON_HAND`] (1×, and no tip standing in for points): where motion explains
-///   the pair, its trusted alignment replaces motion's. A point on the hand goes as far as
+///   the pair, its alignment replaces motion's unless its path runs along the band's edge.
+///   Motion's cost has vouched for the pair, so track's own bound is not applied: on
+///   milv-sim's drawing, true pairs whose points pass this yardstick cost up to 0.058 and
+///   are still aligned better than by motion (BENCHMARKS.md, "Where the tip vouches,
+///   track's cost does not veto"). A point on the hand goes as far as
 ///   the tip (on milv-sim's drawing, 0.94–1.40× over 60 clips); points on a pushed object,
 ///   which only moves in the push, or where the arm leaves the picture, go less far
 ///   (pushing: 0.03–0.99×). The tip is only a fair yardstick this strict where motion
@@ -113,18 +120,22 @@ pub struct HandTrack {
     pub min_travel: f64,
     /// Whether the tip stands in when no tracked point survives (as in [`Track`]).
     pub tip_stands_in: bool,
+    /// Trust bound on the cost per dimension.
+    pub max_cost: f64,
 }
 
 impl HandTrack {
-    /// Points on the hand: as far as the tip.
+    /// Points on the hand: as far as the tip; motion's cost has vouched for the pair.
     pub const ON_HAND: HandTrack = HandTrack {
         min_travel: 1.0,
         tip_stands_in: false,
+        max_cost: f64::INFINITY,
     };
-    /// Points that move at all: a tenth of the tip's path.
+    /// Points that move at all: a tenth of the tip's path; track's own bound.
     pub const MOVING: HandTrack = HandTrack {
         min_travel: 0.1,
         tip_stands_in: true,
+        max_cost: TRACK_MAX_COST,
     };
 }
 
@@ -134,7 +145,7 @@ impl FeatureKind for HandTrack {
     }
 
     fn untrusted_cost(&self) -> f64 {
-        Track.untrusted_cost()
+        self.max_cost
     }
 
     fn extract(&self, clip: &Clip) -> Result<Features, Error> {
