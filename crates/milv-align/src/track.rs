@@ -99,27 +99,29 @@ impl FeatureKind for Track {
 /// differences ([`motion::TipTracker`]): the farthest-travelled point must travel at
 /// least [`min_travel`](Self::min_travel) times as far as that tip.
 ///
-/// * [`HandTrack::ON_HAND`] (1×, and no tip standing in for points): where motion explains
+/// * [`HandTrack::ON_HAND`] (1×; a clip it cannot judge is refused): where motion explains
 ///   the pair, its alignment replaces motion's unless its path runs along the band's edge.
-///   Motion's cost has vouched for the pair, so track's own bound is not applied: on
-///   milv-sim's drawing, true pairs whose points pass this yardstick cost up to 0.058 and
-///   are still aligned better than by motion (BENCHMARKS.md, "Where the tip vouches,
-///   track's cost does not veto"). A point on the hand goes as far as
-///   the tip (on milv-sim's drawing, 0.94–1.40× over 60 clips); points on a pushed object,
-///   which only moves in the push, or where the arm leaves the picture, go less far
-///   (pushing: 0.03–0.99×). The tip is only a fair yardstick this strict where motion
-///   explains the pair: on the MuJoCo set's textured scenes it jitters, and hand points
-///   travel 0.16–2× as far.
-/// * [`HandTrack::MOVING`] (0.1×): where motion does not explain the pair and `auto` falls
-///   back to track. Points that travel less than a tenth of the tip's path sit on what
-///   barely moves (a pushed object: milv-sim pushing clips down to 0.03×), so track's
-///   alignment would follow the wrong thing; no clip of the MuJoCo set's six seeds is below
-///   0.16× (BENCHMARKS.md, "Track's points must move").
+///   A point on the hand goes as far as the tip (on milv-sim's drawing, 0.94–1.40× over 60
+///   clips); points on a pushed object, which only moves in the push, or where the arm
+///   leaves the picture, go less far (pushing: 0.03–0.99×). The tip is only a fair
+///   yardstick this strict where motion explains the pair: on the MuJoCo set's textured
+///   scenes it jitters, and hand points travel 0.16–2× as far. Motion's cost has vouched
+///   for the pair, so track's own cost bound is not applied: true milv-sim drawing pairs
+///   that pass this yardstick cost up to 0.058 and are still aligned better than by motion
+///   (BENCHMARKS.md, "Where the tip vouches, track's cost does not veto").
+/// * [`HandTrack::MOVING`] (0.1×; a clip it cannot judge is kept as [`Track`] keeps it):
+///   where motion does not explain the pair and `auto` falls back to track. Points that
+///   travel less than a tenth of the tip's path sit on what barely moves (a pushed object:
+///   milv-sim pushing clips down to 0.03×), so track's alignment would follow the wrong
+///   thing; no clip of the MuJoCo set's six seeds is below 0.16× (BENCHMARKS.md, "Track's
+///   points must move").
 pub struct HandTrack {
     /// Least travel of the farthest-travelled point, as a fraction of the tip's.
     pub min_travel: f64,
-    /// Whether the tip stands in when no tracked point survives (as in [`Track`]).
-    pub tip_stands_in: bool,
+    /// Whether a clip the yardstick cannot judge is kept as [`Track`] keeps it: the tip
+    /// stands in where no tracked point survives, and the points are kept where frame
+    /// differences find no tip. Otherwise such a clip is refused.
+    pub lenient: bool,
     /// Trust bound on the cost per dimension.
     pub max_cost: f64,
 }
@@ -128,13 +130,13 @@ impl HandTrack {
     /// Points on the hand: as far as the tip; motion's cost has vouched for the pair.
     pub const ON_HAND: HandTrack = HandTrack {
         min_travel: 1.0,
-        tip_stands_in: false,
+        lenient: false,
         max_cost: f64::INFINITY,
     };
     /// Points that move at all: a tenth of the tip's path; track's own bound.
     pub const MOVING: HandTrack = HandTrack {
         min_travel: 0.1,
-        tip_stands_in: true,
+        lenient: true,
         max_cost: TRACK_MAX_COST,
     };
 }
@@ -220,12 +222,16 @@ fn human_features(clip: &Clip, yardstick: Option<&HandTrack>) -> Result<Features
         // Untextured, flat-shaded arms (milv-sim's) may give the point tracker nothing to
         // hold: then the tip found from frame differences stands in, in image coordinates.
         (None, None) => vec![tip()?],
-        (None, Some(y)) if y.tip_stands_in => vec![tip()?],
-        (Some(p), Some(y)) => {
-            y.check(&p, &tip()?)
-                .map_err(|m| Error::Invalid(format!("episode {}: {m}", clip.episode_id)))?;
-            p
-        }
+        (None, Some(y)) if y.lenient => vec![tip()?],
+        (Some(p), Some(y)) => match tip() {
+            Ok(t) => {
+                y.check(&p, &t)
+                    .map_err(|m| Error::Invalid(format!("episode {}: {m}", clip.episode_id)))?;
+                p
+            }
+            Err(_) if y.lenient => p,
+            Err(e) => return Err(e),
+        },
         (None, Some(_)) => {
             return Err(Error::Invalid(format!(
                 "episode {}: no tracked point survives the clip",
