@@ -2,9 +2,10 @@
 //! forward–backward check): where the most travelled points of a clip's moving region go.
 //!
 //! Nothing here knows the scene: no table, no border the arm enters from. Corners are
-//! picked in the first frame wherever anything moves later; the points that travel
-//! farthest are on the part of the arm farthest from its fixed base, i.e. the hand or
-//! gripper, whatever the camera. When a lost point had out-travelled every survivor, the
+//! picked in the first frame ([`Seeds::First`]), or also in every 8th frame after it and
+//! followed both ways ([`Seeds::Through`]), wherever anything moves in the clip; the
+//! points that travel farthest are on the part of the arm farthest from its fixed base,
+//! i.e. the hand or gripper, whatever the camera. When a lost point had out-travelled every survivor, the
 //! hand was lost (it turns and changes its texture) and the clip is tracked again with a
 //! larger window (BENCHMARKS.md, "A lost hand is tracked again").
 
@@ -30,6 +31,8 @@ const CORNER_QUALITY: f32 = 0.01;
 const MIN_DISTANCE: f64 = 2.0;
 /// Frame differences (RGB distance, 3×3 mean) above this count as motion for the mask.
 const MASK_MOTION: f32 = 12.0;
+/// Frames between the frames whose corners seed new points.
+const SEED_EVERY: usize = 8;
 /// How many of the most travelled points are kept.
 pub const TOP_POINTS: usize = 3;
 /// ... if they travel at least this share of the farthest one's path.
@@ -219,7 +222,14 @@ fn corners(gx: &Gray, gy: &Gray, mask: &[bool]) -> Vec<(f64, f64)> {
             eig[y * w + x] = 0.5 * (a + c - ((a - c).powi(2) + 4.0 * b * b).sqrt());
         }
     }
-    let max = eig.iter().copied().fold(0.0f32, f32::max);
+    // Quality is relative to the strongest corner inside the mask (as OpenCV's), so that a
+    // textured background does not raise the bar for a low-contrast hand.
+    let max = eig
+        .iter()
+        .zip(mask)
+        .filter(|p| *p.1)
+        .map(|p| *p.0)
+        .fold(0.0f32, f32::max);
     if max <= 0.0 {
         return Vec::new();
     }
@@ -272,6 +282,17 @@ fn motion_mask(frames: &[Vec<u8>], w: usize, h: usize) -> Vec<bool> {
     grown
 }
 
+/// Which frames' corners seed points.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Seeds {
+    /// The first frame's, followed forwards.
+    First,
+    /// The first frame's and every [`SEED_EVERY`]th frame's after it, each followed
+    /// forwards and backwards to both ends of the clip: a hand that enters the picture, or
+    /// shows its corners only later, gets points where it shows.
+    Through,
+}
+
 /// The tracks (pixel positions, one per frame) of the [`TOP_POINTS`] points that travel
 /// farthest among those tracked through the whole clip (RGB24 frames of `w`×`h`),
 /// farthest first; `None` when nothing moves or no point survives.
@@ -279,7 +300,7 @@ fn motion_mask(frames: &[Vec<u8>], w: usize, h: usize) -> Vec<bool> {
 /// When a point the tracker lost had travelled farther before it was lost than every
 /// point that survived, the hand itself was lost and the survivors are on the slower
 /// shoulder or torso: the clip is tracked again with the [`COARSE`] window.
-pub fn hand_tracks(frames: &[Vec<u8>], w: usize, h: usize) -> Option<Vec<Vec<(f64, f64)>>> {
+pub fn hand_tracks(frames: &[Vec<u8>], w: usize, h: usize, seeds: Seeds) -> Option<Vec<Vec<(f64, f64)>>> {
     if frames.len() < 2 {
         return None;
     }
@@ -289,45 +310,59 @@ pub fn hand_tracks(frames: &[Vec<u8>], w: usize, h: usize) -> Option<Vec<Vec<(f6
         .iter()
         .map(|f| Pyramid::new(Gray::from_rgb(f, w, h), COARSE.levels))
         .collect();
-    let (_, gx, gy) = &pyr[0].levels[0];
-    let start = corners(gx, gy, &mask);
-    let fine = follow(&pyr, &start, FINE);
-    let followed = if fine.hand_lost() {
-        follow(&pyr, &start, COARSE)
-    } else {
-        fine
+    let every = match seeds {
+        Seeds::First => pyr.len(),
+        Seeds::Through => SEED_EVERY,
     };
+    let track_all = |window: Window| {
+        let mut all = Followed {
+            tracks: Vec::new(),
+            alive: Vec::new(),
+        };
+        for k in (0..pyr.len()).step_by(every) {
+            let (_, gx, gy) = &pyr[k].levels[0];
+            let more = follow(&pyr, k, &corners(gx, gy, &mask), window);
+            all.tracks.extend(more.tracks);
+            all.alive.extend(more.alive);
+        }
+        all
+    };
+    let fine = track_all(FINE);
+    let followed = if fine.hand_lost() { track_all(COARSE) } else { fine };
     followed.top()
 }
 
 /// Points followed through a clip.
 struct Followed {
-    /// Per point, its position in every frame (held at the last one after it is lost).
+    /// Per point, its position in every frame (held where it was lost).
     tracks: Vec<Vec<(f64, f64)>>,
     alive: Vec<bool>,
 }
 
-/// Follows `start` (points of the first frame) through the frames' pyramids with `window`;
-/// a point is lost when LK fails or its forward–backward check misses by [`FB_MAX`].
-fn follow(pyr: &[Pyramid], start: &[(f64, f64)], window: Window) -> Followed {
-    let mut tracks: Vec<Vec<(f64, f64)>> = start.iter().map(|&p| vec![p]).collect();
+/// Follows `start` (points of frame `k`) forwards to the last frame and backwards to the
+/// first through the frames' pyramids with `window`; a point is lost when LK fails or its
+/// forward–backward check misses by [`FB_MAX`].
+fn follow(pyr: &[Pyramid], k: usize, start: &[(f64, f64)], window: Window) -> Followed {
+    let n = pyr.len();
+    let mut tracks: Vec<Vec<(f64, f64)>> = start.iter().map(|&p| vec![p; n]).collect();
     let mut alive = vec![true; start.len()];
-    for t in 1..pyr.len() {
-        for (k, track) in tracks.iter_mut().enumerate() {
-            let p = track[t - 1];
-            let next = if alive[k] {
-                lk(&pyr[t - 1], &pyr[t], p, window).filter(|&q| {
-                    lk(&pyr[t], &pyr[t - 1], q, window)
-                        .is_some_and(|back| (back.0 - p.0).hypot(back.1 - p.1) < FB_MAX)
-                })
-            } else {
-                None
-            };
-            match next {
-                Some(q) => track.push(q),
+    let step = |from: usize, to: usize, p: (f64, f64)| {
+        lk(&pyr[from], &pyr[to], p, window).filter(|&q| {
+            lk(&pyr[to], &pyr[from], q, window)
+                .is_some_and(|back| (back.0 - p.0).hypot(back.1 - p.1) < FB_MAX)
+        })
+    };
+    for (track, alive) in tracks.iter_mut().zip(alive.iter_mut()) {
+        for (from, to) in (k..n - 1)
+            .map(|t| (t, t + 1))
+            .chain((1..=k).rev().map(|t| (t, t - 1)))
+        {
+            let p = track[from];
+            match (*alive).then(|| step(from, to, p)).flatten() {
+                Some(q) => track[to] = q,
                 None => {
-                    alive[k] = false;
-                    track.push(p);
+                    *alive = false;
+                    track[to] = p;
                 }
             }
         }
@@ -412,7 +447,7 @@ mod tests {
             .map(|t| (12.0 + 2.0 * t as f64, 12.0 + t as f64))
             .collect();
         let frames: Vec<Vec<u8>> = path.iter().map(|&(x, y)| frame(w, h, x, y)).collect();
-        let tracks = hand_tracks(&frames, w, h).unwrap();
+        let tracks = hand_tracks(&frames, w, h, Seeds::First).unwrap();
         assert_eq!(tracks.len(), TOP_POINTS);
         // The points sit on the patch: each one's offset from its centre stays within a
         // pixel for most of the clip (a point at an edge may slide along it a little).
@@ -458,7 +493,7 @@ mod tests {
             .iter()
             .map(|&(x, y)| Pyramid::new(Gray::from_rgb(&frame(w, h, x, y), w, h), COARSE.levels))
             .collect();
-        let f = follow(&pyr, &[(path[0].0 - 1.0, path[0].1 - 1.0)], COARSE);
+        let f = follow(&pyr, 0, &[(path[0].0 - 1.0, path[0].1 - 1.0)], COARSE);
         assert!(f.alive[0]);
         let end = f.tracks[0][11];
         assert!(
@@ -470,6 +505,38 @@ mod tests {
     #[test]
     fn a_still_clip_has_no_track() {
         let frames = vec![frame(32, 32, 16.0, 16.0); 5];
-        assert!(hand_tracks(&frames, 32, 32).is_none());
+        assert!(hand_tracks(&frames, 32, 32, Seeds::First).is_none());
+    }
+
+    #[test]
+    fn a_point_seeded_mid_clip_is_followed_to_both_ends() {
+        let (w, h) = (64, 48);
+        let path: Vec<(f64, f64)> = (0..16)
+            .map(|t| (12.0 + 2.0 * t as f64, 12.0 + t as f64))
+            .collect();
+        let pyr: Vec<Pyramid> = path
+            .iter()
+            .map(|&(x, y)| Pyramid::new(Gray::from_rgb(&frame(w, h, x, y), w, h), FINE.levels))
+            .collect();
+        // A corner of the checkerboard, 2 px up and left of the patch's centre, at frame 9.
+        let f = follow(&pyr, 9, &[(path[9].0 - 2.0, path[9].1 - 2.0)], FINE);
+        assert!(f.alive[0]);
+        for t in [0, 9, 15] {
+            let got = f.tracks[0][t];
+            assert!(
+                (got.0 - path[t].0 + 2.0).hypot(got.1 - path[t].1 + 2.0) < 1.0,
+                "frame {t}: {got:?}"
+            );
+        }
+        // Seeding through the clip finds the patch as seeding at the start does.
+        let frames: Vec<Vec<u8>> = path.iter().map(|&(x, y)| frame(w, h, x, y)).collect();
+        let through = hand_tracks(&frames, w, h, Seeds::Through).unwrap();
+        assert_eq!(through.len(), TOP_POINTS);
+        for track in through {
+            let off = (track[0].0 - path[0].0, track[0].1 - path[0].1);
+            assert!(off.0.hypot(off.1) < 12.0, "{track:?}");
+            let end = (track[15].0 - path[15].0 - off.0, track[15].1 - path[15].1 - off.1);
+            assert!(end.0.hypot(end.1) < 1.5, "{track:?}");
+        }
     }
 }

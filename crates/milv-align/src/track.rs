@@ -99,8 +99,11 @@ impl FeatureKind for Track {
 /// differences ([`motion::TipTracker`]): the farthest-travelled point must travel at
 /// least [`min_travel`](Self::min_travel) times as far as that tip.
 ///
-/// * [`HandTrack::ON_HAND`] (1×; a clip it cannot judge is refused): where motion explains
-///   the pair, its alignment replaces motion's unless its path runs along the band's edge.
+/// * [`HandTrack::ON_HAND`] (1×; a clip it cannot judge is refused; points seeded through
+///   the clip, [`klt::Seeds::Through`]): where motion explains the pair, its alignment
+///   replaces motion's unless its path runs along the band's edge. On milv-sim's low-contrast
+///   hand, points seeded in later frames too are on the hand where the first frame's are
+///   not (BENCHMARKS.md, "Points seeded through the clip").
 ///   A point on the hand goes as far as the tip (on milv-sim's drawing, 0.94–1.40× over 60
 ///   clips); points on a pushed object, which only moves in the push, or where the arm
 ///   leaves the picture, go less far (pushing: 0.03–0.99×). The tip is only a fair
@@ -124,6 +127,8 @@ pub struct HandTrack {
     pub lenient: bool,
     /// Trust bound on the cost per dimension.
     pub max_cost: f64,
+    /// Which frames seed the tracked points.
+    pub seeds: klt::Seeds,
 }
 
 impl HandTrack {
@@ -132,12 +137,14 @@ impl HandTrack {
         min_travel: 1.0,
         lenient: false,
         max_cost: f64::INFINITY,
+        seeds: klt::Seeds::Through,
     };
     /// Points that move at all: a tenth of the tip's path; track's own bound.
     pub const MOVING: HandTrack = HandTrack {
         min_travel: 0.1,
         lenient: true,
         max_cost: TRACK_MAX_COST,
+        seeds: klt::Seeds::First,
     };
 }
 
@@ -208,7 +215,7 @@ fn alternate(
 fn human_features(clip: &Clip, yardstick: Option<&HandTrack>) -> Result<Features, Error> {
     let (frames, w, h) = clip.all_rgb()?;
     let n = frames.len();
-    let points = klt::hand_tracks(&frames, w, h);
+    let points = klt::hand_tracks(&frames, w, h, yardstick.map_or(klt::Seeds::First, |y| y.seeds));
     let tip = || {
         clip.tips(&frames, w, h).map(<[_]>::to_vec).ok_or_else(|| {
             Error::Invalid(format!(
