@@ -440,6 +440,13 @@ mod tests {
         rgb
     }
 
+    /// The pyramids of the patch's frames along `path`, for `window`.
+    fn pyramids(path: &[(f64, f64)], w: usize, h: usize, window: Window) -> Vec<Pyramid> {
+        path.iter()
+            .map(|&(x, y)| Pyramid::new(Gray::from_rgb(&frame(w, h, x, y), w, h), window.levels))
+            .collect()
+    }
+
     #[test]
     fn a_moving_textured_patch_is_followed_to_within_a_pixel() {
         let (w, h) = (64, 48);
@@ -485,14 +492,10 @@ mod tests {
     #[test]
     fn the_coarse_window_follows_the_patch_too() {
         // At the frame size of the sets it is meant for (its coarsest level is 1/8 of it).
-        let (w, h) = (128, 128);
         let path: Vec<(f64, f64)> = (0..12)
             .map(|t| (30.0 + 4.0 * t as f64, 40.0 + 2.0 * t as f64))
             .collect();
-        let pyr: Vec<Pyramid> = path
-            .iter()
-            .map(|&(x, y)| Pyramid::new(Gray::from_rgb(&frame(w, h, x, y), w, h), COARSE.levels))
-            .collect();
+        let pyr = pyramids(&path, 128, 128, COARSE);
         let f = follow(&pyr, 0, &[(path[0].0 - 1.0, path[0].1 - 1.0)], COARSE);
         assert!(f.alive[0]);
         let end = f.tracks[0][11];
@@ -514,10 +517,7 @@ mod tests {
         let path: Vec<(f64, f64)> = (0..16)
             .map(|t| (12.0 + 2.0 * t as f64, 12.0 + t as f64))
             .collect();
-        let pyr: Vec<Pyramid> = path
-            .iter()
-            .map(|&(x, y)| Pyramid::new(Gray::from_rgb(&frame(w, h, x, y), w, h), FINE.levels))
-            .collect();
+        let pyr = pyramids(&path, w, h, FINE);
         // A corner of the checkerboard, 2 px up and left of the patch's centre, at frame 9.
         let f = follow(&pyr, 9, &[(path[9].0 - 2.0, path[9].1 - 2.0)], FINE);
         assert!(f.alive[0]);
