@@ -5,9 +5,9 @@
 //! picked in the first frame ([`Seeds::First`]), or also in every 8th frame after it and
 //! followed both ways ([`Seeds::Through`]), wherever anything moves in the clip; the
 //! points that travel farthest are on the part of the arm farthest from its fixed base,
-//! i.e. the hand or gripper, whatever the camera. When a lost point had out-travelled every survivor, the
-//! hand was lost (it turns and changes its texture) and the clip is tracked again with a
-//! larger window (BENCHMARKS.md, "A lost hand is tracked again").
+//! i.e. the hand or gripper, whatever the camera. When a lost point had out-travelled
+//! every survivor, the hand was lost (it turns and changes its texture) and the clip is
+//! tracked again with a larger window (BENCHMARKS.md, "A lost hand is tracked again").
 
 use crate::motion;
 
@@ -440,6 +440,11 @@ mod tests {
         rgb
     }
 
+    /// The patch's centre over `n` frames: 2 px right and 1 px down per frame from (12, 12).
+    fn diagonal(n: usize) -> Vec<(f64, f64)> {
+        (0..n).map(|t| (12.0 + 2.0 * t as f64, 12.0 + t as f64)).collect()
+    }
+
     /// The pyramids of the patch's frames along `path`, for `window`.
     fn pyramids(path: &[(f64, f64)], w: usize, h: usize, window: Window) -> Vec<Pyramid> {
         path.iter()
@@ -450,9 +455,7 @@ mod tests {
     #[test]
     fn a_moving_textured_patch_is_followed_to_within_a_pixel() {
         let (w, h) = (64, 48);
-        let path: Vec<(f64, f64)> = (0..20)
-            .map(|t| (12.0 + 2.0 * t as f64, 12.0 + t as f64))
-            .collect();
+        let path = diagonal(20);
         let frames: Vec<Vec<u8>> = path.iter().map(|&(x, y)| frame(w, h, x, y)).collect();
         let tracks = hand_tracks(&frames, w, h, Seeds::First).unwrap();
         assert_eq!(tracks.len(), TOP_POINTS);
@@ -514,9 +517,7 @@ mod tests {
     #[test]
     fn a_point_seeded_mid_clip_is_followed_to_both_ends() {
         let (w, h) = (64, 48);
-        let path: Vec<(f64, f64)> = (0..16)
-            .map(|t| (12.0 + 2.0 * t as f64, 12.0 + t as f64))
-            .collect();
+        let path = diagonal(16);
         let pyr = pyramids(&path, w, h, FINE);
         // A corner of the checkerboard, 2 px up and left of the patch's centre, at frame 9.
         let f = follow(&pyr, 9, &[(path[9].0 - 2.0, path[9].1 - 2.0)], FINE);

@@ -146,6 +146,20 @@ impl HandTrack {
         max_cost: TRACK_MAX_COST,
         seeds: klt::Seeds::First,
     };
+
+    /// Why tracked `points` fail this yardstick against the frame-difference `tip`, if they do.
+    fn check(&self, points: &[Vec<(f64, f64)>], tip: &[(f64, f64)]) -> std::result::Result<(), String> {
+        let farthest = points.iter().map(|t| travel(&cleaned(t))).fold(0.0, f64::max);
+        let tip_travel = travel(&cleaned(tip));
+        if farthest < self.min_travel * tip_travel {
+            return Err(format!(
+                "the tracked points travel {farthest:.0} px, less than {}× the moving region's \
+                 tip ({tip_travel:.0} px): they do not move with the hand",
+                self.min_travel
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl FeatureKind for HandTrack {
@@ -269,22 +283,6 @@ fn travel((x, y): &(Vec<f64>, Vec<f64>)) -> f64 {
     (1..x.len())
         .map(|t| (x[t] - x[t - 1]).hypot(y[t] - y[t - 1]))
         .sum()
-}
-
-impl HandTrack {
-    /// Why tracked `points` fail this yardstick against the frame-difference `tip`, if they do.
-    fn check(&self, points: &[Vec<(f64, f64)>], tip: &[(f64, f64)]) -> std::result::Result<(), String> {
-        let farthest = points.iter().map(|t| travel(&cleaned(t))).fold(0.0, f64::max);
-        let tip_travel = travel(&cleaned(tip));
-        if farthest < self.min_travel * tip_travel {
-            return Err(format!(
-                "the tracked points travel {farthest:.0} px, less than {}× the moving region's \
-                 tip ({tip_travel:.0} px): they do not move with the hand",
-                self.min_travel
-            ));
-        }
-        Ok(())
-    }
 }
 
 /// The robot clip's states, centred and scaled (one scale for all columns, so the path's
