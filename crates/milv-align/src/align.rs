@@ -281,8 +281,8 @@ impl PairFit<'_> {
 /// Aligns one pair's clips with `kind`, or, for a kind that picks per pair
 /// ([`FeatureKind::cascade`]), with the first of its stages whose cost stays within its
 /// bound and explains the pair ([`PairFit::explained`]), replaced by its
-/// [`unless_trusted`](crate::features::Stage::unless_trusted) kind's alignment where that
-/// is trusted; when no stage's kind explains the pair within its bound, the first that
+/// [`unless_trusted`](crate::features::Stage::unless_trusted) kinds' lowest-cost trusted
+/// alignment, if any; when no stage's kind explains the pair within its bound, the first that
 /// explains it, else the last that aligned it at all (so a pair is not flagged for the
 /// sake of a kind that explains it worse). The band's edge plays no part in the cascade:
 /// both kinds share the band, and a strong warp puts either's path near its edge.
@@ -302,8 +302,10 @@ fn align_pair<'k>(
             Ok(fit) if fit.cost_per_dim() <= stage.keep_below && fit.explained(opts.max_cost) => {
                 let better = stage
                     .unless_trusted
-                    .and_then(|k| align_with(k, human, robot, opts).ok())
-                    .filter(|f| f.trusted(opts.max_cost));
+                    .iter()
+                    .filter_map(|&k| align_with(k, human, robot, opts).ok())
+                    .filter(|f| f.trusted(opts.max_cost))
+                    .min_by(|a, b| a.cost_per_dim().total_cmp(&b.cost_per_dim()));
                 return Ok(better.unwrap_or(fit));
             }
             Ok(fit) => fits.push(fit),
@@ -728,22 +730,24 @@ mod tests {
     }
 
     fn picked(cascade: &[(&'static dyn FeatureKind, f64)]) -> std::result::Result<&'static str, String> {
-        picked_unless(cascade, None)
+        picked_unless(cascade, &[])
     }
 
-    /// The kind `auto`-like stages pick, the first stage replaced by `unless` where trusted.
+    /// The kind `auto`-like stages pick, the first stage replaced by one of `unless` where
+    /// trusted.
     fn picked_unless(
         cascade: &[(&'static dyn FeatureKind, f64)],
-        unless: Option<&'static dyn FeatureKind>,
+        unless: &[&'static dyn FeatureKind],
     ) -> std::result::Result<&'static str, String> {
         // A kind's cascade is static; a test's may leak.
+        let unless: &'static [&'static dyn FeatureKind] = Box::leak(unless.to_vec().into_boxed_slice());
         let stages: Vec<Stage> = cascade
             .iter()
             .enumerate()
             .map(|(i, &(kind, keep_below))| Stage {
                 kind,
                 keep_below,
-                unless_trusted: if i == 0 { unless } else { None },
+                unless_trusted: if i == 0 { unless } else { &[] },
             })
             .collect();
         let cascade = Box::leak(stages.into_boxed_slice());
@@ -789,12 +793,20 @@ mod tests {
     #[test]
     fn a_kept_stage_gives_way_to_its_unless_kind_only_where_that_is_trusted() {
         let cascade: &[(&'static dyn FeatureKind, f64)] = &[(&NEAR, 0.01), (&FAR, f64::INFINITY)];
-        assert_eq!(picked_unless(cascade, Some(&EXACT)), Ok("exact"));
+        assert_eq!(picked_unless(cascade, &[&EXACT]), Ok("exact"));
         // Not trusted (cost ≈ 0.02 above its 0.01), or cannot align: the stage's own.
-        assert_eq!(picked_unless(cascade, Some(&FAR_UNTRUSTED)), Ok("near"));
-        assert_eq!(picked_unless(cascade, Some(&BROKEN)), Ok("near"));
+        assert_eq!(picked_unless(cascade, &[&FAR_UNTRUSTED]), Ok("near"));
+        assert_eq!(picked_unless(cascade, &[&BROKEN]), Ok("near"));
+        // Of several trusted, the lowest cost, in whichever order they come; the untrusted
+        // and the broken are passed over.
+        assert_eq!(picked_unless(cascade, &[&FAR, &EXACT]), Ok("exact"));
+        assert_eq!(picked_unless(cascade, &[&EXACT, &FAR]), Ok("exact"));
+        assert_eq!(
+            picked_unless(cascade, &[&BROKEN, &FAR_UNTRUSTED, &FAR]),
+            Ok("far")
+        );
         // Only a kept stage is replaced: past its bound, the next stage decides.
         let past: &[(&'static dyn FeatureKind, f64)] = &[(&FAR, 0.01), (&NEAR, f64::INFINITY)];
-        assert_eq!(picked_unless(past, Some(&EXACT)), Ok("near"));
+        assert_eq!(picked_unless(past, &[&EXACT]), Ok("near"));
     }
 }

@@ -151,10 +151,11 @@ pub struct Stage {
     /// kind's own [`untrusted_cost`](FeatureKind::untrusted_cost) (else the next stage is
     /// tried).
     pub keep_below: f64,
-    /// A kind whose alignment replaces the kept one where it is trusted (cost and band
-    /// edge, [`PairFit::trusted`](crate::align::PairFit::trusted)); one that cannot align
-    /// the pair leaves it.
-    pub unless_trusted: Option<&'static dyn FeatureKind>,
+    /// Kinds whose alignment replaces the kept one where it is trusted (cost and band
+    /// edge, [`PairFit::trusted`](crate::align::PairFit::trusted)): of those trusted, the
+    /// one with the lowest cost per dimension; a kind that cannot align the pair is passed
+    /// over.
+    pub unless_trusted: &'static [&'static dyn FeatureKind],
 }
 
 /// The DTW a pair is aligned with (its band and step pattern), as the robot frame of
@@ -372,11 +373,14 @@ impl FeatureKind for Translated {
 /// pushed object or where the arm leaves the picture), and its alignment replaces motion's
 /// where its path stays off the band's edge, whatever track's own cost (motion's has
 /// vouched for the pair; BENCHMARKS.md, "Track where motion's tip vouches for its points"
-/// and "Where the tip vouches, track's cost does not veto").
+/// and "Where the tip vouches, track's cost does not veto"). Points seeded through the
+/// clip and the first frame's are tried both ([`HandTrack::ON_HAND_FIRST`]); of the
+/// alignments that qualify, the cheaper is kept.
 ///
 /// [`Track`]: crate::track::Track
 /// [`HandTrack::MOVING`]: crate::track::HandTrack::MOVING
 /// [`HandTrack::ON_HAND`]: crate::track::HandTrack::ON_HAND
+/// [`HandTrack::ON_HAND_FIRST`]: crate::track::HandTrack::ON_HAND_FIRST
 pub struct Auto;
 
 /// Motion's cost per dimension above which `auto` turns to track: between the design
@@ -400,12 +404,15 @@ impl FeatureKind for Auto {
             Stage {
                 kind: &Motion,
                 keep_below: AUTO_MOTION_COST,
-                unless_trusted: Some(&crate::track::HandTrack::ON_HAND),
+                unless_trusted: &[
+                    &crate::track::HandTrack::ON_HAND,
+                    &crate::track::HandTrack::ON_HAND_FIRST,
+                ],
             },
             Stage {
                 kind: &crate::track::HandTrack::MOVING,
                 keep_below: f64::INFINITY,
-                unless_trusted: None,
+                unless_trusted: &[],
             },
         ]
     }

@@ -287,7 +287,7 @@ fn motion_mask(frames: &[Vec<u8>], w: usize, h: usize) -> Vec<bool> {
 pub enum Seeds {
     /// The first frame's, followed forwards.
     First,
-    /// The first frame's and every [`SEED_EVERY`]th frame's after it, each followed
+    /// The first frame's and every 8th frame's after it (`SEED_EVERY`), each followed
     /// forwards and backwards to both ends of the clip: a hand that enters the picture, or
     /// shows its corners only later, gets points where it shows.
     Through,
@@ -299,7 +299,7 @@ pub enum Seeds {
 ///
 /// When a point the tracker lost had travelled farther before it was lost than every
 /// point that survived, the hand itself was lost and the survivors are on the slower
-/// shoulder or torso: the clip is tracked again with the [`COARSE`] window.
+/// shoulder or torso: the clip is tracked again with the coarse window (15×15 on 4 levels).
 pub fn hand_tracks(frames: &[Vec<u8>], w: usize, h: usize, seeds: Seeds) -> Option<Vec<Vec<(f64, f64)>>> {
     if frames.len() < 2 {
         return None;

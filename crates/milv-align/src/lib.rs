@@ -6,7 +6,7 @@
 //!
 //! | module | what |
 //! |---|---|
-//! | [`dtw`] | banded DTW (Sakoe–Chiba, O(n·band) memory), step patterns, [`Features`]; posterior decoding of the path ([`posterior_medians`]) |
+//! | [`mod@dtw`] | banded DTW (Sakoe–Chiba, O(n·band) memory), step patterns, [`Features`]; posterior decoding of the path ([`posterior_medians`]) |
 //! | [`features`] | the [`FeatureKind`] trait and its kinds: `motion`, `track`, `state`, `translated` |
 //! | [`motion`] | tip tracking from frame differences, table-plane rectification, track filters |
 //! | [`klt`] | feature-point tracking (Shi–Tomasi + pyramidal Lucas–Kanade) of the most travelled points |

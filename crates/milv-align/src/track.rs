@@ -103,7 +103,9 @@ impl FeatureKind for Track {
 ///   the clip, [`klt::Seeds::Through`]): where motion explains the pair, its alignment
 ///   replaces motion's unless its path runs along the band's edge. On milv-sim's low-contrast
 ///   hand, points seeded in later frames too are on the hand where the first frame's are
-///   not (BENCHMARKS.md, "Points seeded through the clip").
+///   not (BENCHMARKS.md, "Points seeded through the clip"). [`HandTrack::ON_HAND_FIRST`]
+///   is the same yardstick on the first frame's points; `auto` keeps whichever of the two
+///   trusted alignments costs less (BENCHMARKS.md, "Both point sets, the cheaper fit").
 ///   A point on the hand goes as far as the tip (on milv-sim's drawing, 0.94–1.40× over 60
 ///   clips); points on a pushed object, which only moves in the push, or where the arm
 ///   leaves the picture, go less far (pushing: 0.03–0.99×). The tip is only a fair
@@ -138,6 +140,11 @@ impl HandTrack {
         lenient: false,
         max_cost: f64::INFINITY,
         seeds: klt::Seeds::Through,
+    };
+    /// [`ON_HAND`](Self::ON_HAND) with the first frame's points only.
+    pub const ON_HAND_FIRST: HandTrack = HandTrack {
+        seeds: klt::Seeds::First,
+        ..Self::ON_HAND
     };
     /// Points that move at all: a tenth of the tip's path; track's own bound.
     pub const MOVING: HandTrack = HandTrack {
