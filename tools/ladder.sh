@@ -135,7 +135,7 @@ for r in "${rungs[@]}"; do
         "$B/milv-sim" gen --task "$fam" --episodes "$R5_EPISODES" --seed 22 --split test --size "$SIZE" \
           --out "$F/r5/test/sim"
         "$B/milv-ingest" "$ds" --manifest "$F/r5/test/sim/manifest.jsonl" --require-actions
-        "$B/milv-align" "$ds" --features motion --temperature 0 --json > "$F/r5/align.json"
+        "$B/milv-align" "$ds" --features motion --temperature 0 --max-band 0.2 --json > "$F/r5/align.json"
       fi
       # Both splits' human/robot demo pairs, paths relative to the file.
       (sed 's#"human":"#"human":"sim/#; s#"robot":"#"robot":"sim/#' "$F/sim/ground_truth.jsonl"

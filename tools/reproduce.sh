@@ -75,9 +75,9 @@ for fam in $FAMILIES; do
   "$B/milv-sim" gen --task "$fam" --episodes "$n" --seed 11 --size "$SIZE" --out "$F/sim" | tee -a "$log"
   say "$fam: milv-ingest"
   "$B/milv-ingest" "$ds" --manifest "$F/sim/manifest.jsonl" --require-actions | tee -a "$log"
-  # Best-path decoding (--temperature 0), as when RESULTS.md was measured.
+  # Best-path decoding (--temperature 0) in a fixed band, as when RESULTS.md was measured.
   say "$fam: milv-align (motion features, from pixels, best path)"
-  "$B/milv-align" "$ds" --features motion --temperature 0 --truth "$F/sim/warps.jsonl" | tee -a "$log"
+  "$B/milv-align" "$ds" --features motion --temperature 0 --max-band 0.2 --truth "$F/sim/warps.jsonl" | tee -a "$log"
   for kind in coupled decoupled; do
     flag=()
     [ "$kind" = decoupled ] && flag=(--decoupled)

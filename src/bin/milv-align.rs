@@ -13,8 +13,10 @@ use milv::data::{CommitMeta, Dataset, DatasetRef, Partition};
 /// Aligns every pair of a dataset version (episodes sharing a pair_id: one human, one
 /// robot clip of the same motion) by dynamic time warping inside a Sakoe-Chiba band, and
 /// commits the `alignments` table (each frame of both clips with its partner and their cost) as a
-/// new version. Prints a per-pair summary: normalised cost, path length, and a trust flag
-/// for pairs whose cost is high or whose path runs along the band's edge.
+/// new version. A pair whose path runs along the band's edge is aligned again in a wider
+/// band (up to --max-band). Prints a per-pair summary: normalised cost, path length, the
+/// band used, and a trust flag for pairs whose cost is high or whose path runs along the
+/// widest band's edge.
 ///
 ///   milv-align DATASET[@V] [--features auto|motion|track|state|translated] [--band F] [--jobs N]
 ///
@@ -74,6 +76,12 @@ struct Common {
     /// Band half-width as a fraction of the longer clip.
     #[arg(long, default_value_t = 0.2)]
     band: f64,
+    /// A pair whose path runs along the band's edge (the band may have cut it short) is
+    /// aligned again in a band 0.1 wider, up to this width; a path still on the edge of
+    /// the widest is flagged untrusted. Default 0.4 (or --band, if wider); at most --band:
+    /// never widen.
+    #[arg(long)]
+    max_band: Option<f64>,
     /// symmetric1 | symmetric2 | asymmetric (each human frame gets one robot frame).
     #[arg(long, default_value = "symmetric2")]
     step: StepPattern,
@@ -126,6 +134,7 @@ enum Cmd {
 fn options(c: &Common) -> AlignOptions {
     AlignOptions {
         band: c.band,
+        max_band: c.max_band.unwrap_or(c.band.max(milv_align::align::MAX_BAND)),
         step: c.step,
         model_id: c.model_id.clone(),
         max_cost: c.max_cost,
@@ -206,18 +215,28 @@ fn run_align(a: RunArgs) -> anyhow::Result<u8> {
         );
         let num = |e: Option<f64>| e.map_or("-".into(), |e| format!("{e:.2}"));
         println!(
-            "{:<28} {:>6} {:>6} {:>8} {:>10} {:>6} {:>7} {:>9} {:>9}",
-            "pair", "human", "robot", "features", "cost/dim", "path", "trusted", "err mean", "prop mean"
+            "{:<28} {:>6} {:>6} {:>8} {:>10} {:>6} {:>5} {:>7} {:>9} {:>9}",
+            "pair",
+            "human",
+            "robot",
+            "features",
+            "cost/dim",
+            "path",
+            "band",
+            "trusted",
+            "err mean",
+            "prop mean"
         );
         for p in &rep.pairs {
             println!(
-                "{:<28} {:>6} {:>6} {:>8} {:>10.4} {:>6} {:>7} {:>9} {:>9}",
+                "{:<28} {:>6} {:>6} {:>8} {:>10.4} {:>6} {:>5.2} {:>7} {:>9} {:>9}",
                 p.pair_id,
                 p.human_frames,
                 p.robot_frames,
                 p.features,
                 p.cost_per_dim,
                 p.path_length,
+                p.band,
                 if p.trusted { "yes" } else { "NO" },
                 num(p.mean_frame_error),
                 num(p.proportional_mean_error),

@@ -16,6 +16,9 @@ use crate::{Error, Result};
 pub struct AlignOptions {
     /// Sakoe–Chiba half-width as a fraction of the longer clip.
     pub band: f64,
+    /// Widest band a pair is re-aligned in, [`BAND_STEP`] wider at a time, while its path
+    /// runs along the band's edge (at most `band`: never widened).
+    pub max_band: f64,
     pub step: StepPattern,
     /// Translation model for `translated` features (default: the only one).
     pub model_id: Option<String>,
@@ -39,6 +42,12 @@ impl AlignOptions {
         if !(self.band > 0.0 && self.band <= 1.0) {
             return Err(Error::Invalid(format!("--band {} must be in (0, 1]", self.band)));
         }
+        if !(self.max_band > 0.0 && self.max_band <= 1.0) {
+            return Err(Error::Invalid(format!(
+                "--max-band {} must be in (0, 1]",
+                self.max_band
+            )));
+        }
         if !(self.temperature >= 0.0 && self.temperature.is_finite()) {
             return Err(Error::Invalid(format!(
                 "--temperature {} must be 0 (the best path) or positive",
@@ -49,6 +58,15 @@ impl AlignOptions {
     }
 }
 
+/// Default [`AlignOptions::max_band`]: on the MuJoCo set, where warps reach 28 frames of
+/// 80, the band of 0.2 cut off the path of 21 of 80 pairs (BENCHMARKS.md, "A band that
+/// widens where the path runs along its edge").
+pub const MAX_BAND: f64 = 0.4;
+/// How much wider each re-alignment's band is.
+pub const BAND_STEP: f64 = 0.1;
+/// Share of a path's cells on the band's edge above which the band may have cut it off.
+pub const EDGE_MAX: f64 = 0.1;
+
 /// Default [`AlignOptions::temperature`]: a path whose cost exceeds the best one's by 20
 /// of its average cells weighs 1/e as much. Chosen on the design seeds (BENCHMARKS.md).
 pub const POSTERIOR_TEMPERATURE: f64 = 20.0;
@@ -57,6 +75,7 @@ impl Default for AlignOptions {
     fn default() -> Self {
         AlignOptions {
             band: 0.2,
+            max_band: MAX_BAND,
             step: StepPattern::Symmetric2,
             model_id: None,
             pairs: None,
@@ -85,6 +104,9 @@ pub struct PairSummary {
     pub path_length: usize,
     /// Share of path cells on the band's edge (the band may have cut off the true path).
     pub band_edge_fraction: f64,
+    /// The band the pair was aligned in: `--band`, widened up to `--max-band` while the
+    /// path ran along its edge.
+    pub band: f64,
     /// False when the cost is high or the path hugs the band: do not train on it blindly.
     pub trusted: bool,
     /// Against ground truth, when given: mean and max |recovered − true| robot frame.
@@ -204,19 +226,21 @@ fn resolve_model(ds: &Dataset, v: u64, wanted: Option<&str>) -> Result<String> {
     }
 }
 
-/// The band's half-width in columns for clips of `n` and `m` frames.
-fn band_width(n: usize, m: usize, opts: &AlignOptions) -> usize {
-    (opts.band * n.max(m) as f64).ceil() as usize
+/// The half-width in columns of a band `band` (fraction of the longer clip) wide for clips
+/// of `n` and `m` frames.
+fn band_width(n: usize, m: usize, band: f64) -> usize {
+    (band * n.max(m) as f64).ceil() as usize
 }
 
-/// The run's band for clips of `n` and `m` frames.
-fn run_band(n: usize, m: usize, opts: &AlignOptions) -> Band {
-    Band::around_diagonal(n, m, band_width(n, m, opts))
-}
-
-/// DTW of two feature matrices in the run's band, with its step pattern.
-fn banded_dtw(a: &crate::Features, b: &crate::Features, opts: &AlignOptions) -> Result<Alignment> {
-    dtw(a, b, &run_band(a.n, b.n, opts), opts.step, true)
+/// DTW of two feature matrices in a band `band` wide, with the run's step pattern.
+fn banded_dtw(a: &crate::Features, b: &crate::Features, band: f64, opts: &AlignOptions) -> Result<Alignment> {
+    dtw(
+        a,
+        b,
+        &Band::around_diagonal(a.n, b.n, band_width(a.n, b.n, band)),
+        opts.step,
+        true,
+    )
 }
 
 /// One pair aligned: the best path, both clips' features (the robot's fitted to the
@@ -227,6 +251,8 @@ pub struct PairFit<'k> {
     pub human: crate::Features,
     pub robot: crate::Features,
     pub band_edge: f64,
+    /// The band it was aligned in (fraction of the longer clip).
+    pub band: f64,
     pub kind: &'k dyn FeatureKind,
 }
 
@@ -244,7 +270,7 @@ impl PairFit<'_> {
     /// Whether the alignment can be trusted: explained, and its path off the band's edge
     /// (a path along the edge may have been cut short by the band).
     pub fn trusted(&self, max_cost: Option<f64>) -> bool {
-        self.explained(max_cost) && self.band_edge <= 0.1
+        self.explained(max_cost) && self.band_edge <= EDGE_MAX
     }
 
     /// Each frame's partner, decoded from the best path by posterior medians at
@@ -266,7 +292,8 @@ impl PairFit<'_> {
                     .collect(),
             });
         }
-        let rows = posterior_medians(h, r, &run_band(h.n, r.n, opts), opts.step, t)?;
+        let band = Band::around_diagonal(h.n, r.n, band_width(h.n, r.n, self.band));
+        let rows = posterior_medians(h, r, &band, opts.step, t)?;
         let cells = staircase(&rows, r.n)
             .into_iter()
             .map(|(i, j)| (i, j, crate::dtw::sq_dist(h.row(i), r.row(j))))
@@ -329,7 +356,8 @@ pub struct Correspondence {
     pub cells: Vec<(usize, usize, f64)>,
 }
 
-/// Aligns one pair's clips on one kind of features.
+/// Aligns one pair's clips on one kind of features, in the run's band or, where the path
+/// runs along its edge, a wider one (up to [`AlignOptions::max_band`]).
 fn align_with<'k>(
     kind: &'k dyn FeatureKind,
     human: &Clip,
@@ -346,15 +374,40 @@ fn align_with<'k>(
         }
     }
     let h = kind.extract(human).map_err(|e| e.to_string())?;
-    let r = kind.fit_pair(&h, kind.extract(robot).map_err(|e| e.to_string())?, &|a, b| {
-        banded_dtw(a, b, opts).ok().map(|al| row_to_col(&al.path, a.n))
+    let r = kind.extract(robot).map_err(|e| e.to_string())?;
+    // A path along the band's edge may have been cut short by it: the clips' warp is
+    // stronger than the band allows, so the pair is aligned again in a wider one.
+    let mut band = opts.band;
+    loop {
+        let fit = fit_in_band(kind, &h, r.clone(), band, opts)?;
+        let wider = (band + BAND_STEP).min(opts.max_band.max(opts.band));
+        if fit.band_edge <= EDGE_MAX || wider <= band + 1e-9 {
+            return Ok(fit);
+        }
+        band = wider;
+    }
+}
+
+/// Fits the robot's features to the human's and aligns them in a band `band` wide.
+fn fit_in_band<'k>(
+    kind: &'k dyn FeatureKind,
+    h: &crate::Features,
+    r: crate::Features,
+    band: f64,
+    opts: &AlignOptions,
+) -> std::result::Result<PairFit<'k>, String> {
+    let h = h.clone();
+    let r = kind.fit_pair(&h, r, &|a, b| {
+        banded_dtw(a, b, band, opts)
+            .ok()
+            .map(|al| row_to_col(&al.path, a.n))
     });
     if h.d != r.d {
         return Err(format!("feature widths differ: human {} and robot {}", h.d, r.d));
     }
     let (n, m) = (h.n, r.n);
-    let w = band_width(n, m, opts);
-    let al = banded_dtw(&h, &r, opts).map_err(|e| e.to_string())?;
+    let w = band_width(n, m, band);
+    let al = banded_dtw(&h, &r, band, opts).map_err(|e| e.to_string())?;
     let edge = al
         .path
         .iter()
@@ -373,6 +426,7 @@ fn align_with<'k>(
         human: h,
         robot: r,
         band_edge: edge,
+        band,
         kind,
     })
 }
@@ -458,6 +512,7 @@ pub fn align_dataset(
         kind.name().into(),
         format!("{:?}", opts.step),
         opts.band.to_string(),
+        format!("max band {}", opts.max_band),
         format!("posterior {}", opts.temperature),
     ];
     parts.extend(model.clone());
@@ -508,7 +563,7 @@ pub fn align_dataset(
                 let fit = align_pair(kind, hc, rc, opts)?;
                 let (per_dim, trusted) = (fit.cost_per_dim(), fit.trusted(opts.max_cost));
                 let corr = fit.correspondence(opts).map_err(|e| e.to_string())?;
-                let (al, edge) = (fit.alignment, fit.band_edge);
+                let (al, edge, band) = (fit.alignment, fit.band_edge, fit.band);
                 let ((mean_err, max_err), (prop_mean, prop_max)) = match opts.truth.get(*p) {
                     Some(t) if t.len() == hc.images.len() => {
                         let got = &corr.human_to_robot;
@@ -536,6 +591,7 @@ pub fn align_dataset(
                         cost_per_dim: per_dim,
                         path_length: al.path.len(),
                         band_edge_fraction: edge,
+                        band,
                         trusted,
                         mean_frame_error: mean_err,
                         max_frame_error: max_err,
@@ -584,7 +640,7 @@ pub fn align_dataset(
         return Ok(report);
     }
     meta.summary = serde_json::json!({
-        "run_id": run_id, "features": kind.name(), "band": opts.band, "step": opts.step,
+        "run_id": run_id, "features": kind.name(), "band": opts.band, "max_band": opts.max_band, "step": opts.step,
         "temperature": opts.temperature, "model_id": model,
         "pairs": report.pairs.len(), "failed": report.failed.len(), "rows": report.rows,
         "untrusted": report.pairs.iter().filter(|p| !p.trusted).map(|p| &p.pair_id).collect::<Vec<_>>(),
@@ -751,7 +807,16 @@ mod tests {
             })
             .collect();
         let cascade = Box::leak(stages.into_boxed_slice());
-        let clip = |domain, n| Clip {
+        let (h, r) = (
+            blank(milv_data::Domain::Human, 12),
+            blank(milv_data::Domain::Robot, 15),
+        );
+        align_pair(&Cascade(cascade), &h, &r, &AlignOptions::default()).map(|f| f.kind.name())
+    }
+
+    /// A clip of `n` blank 1×1 frames (the test kinds make up their features).
+    fn blank(domain: milv_data::Domain, n: usize) -> Clip {
+        Clip {
             episode_id: format!("{domain:?}"),
             domain,
             encoding: milv_data::FrameEncoding::Raw,
@@ -760,12 +825,69 @@ mod tests {
             images: vec![vec![0; 3]; n],
             states: None,
             tip_cache: Default::default(),
-        };
+        }
+    }
+
+    /// A strong warp: the human's progress grows with the cube of time, the robot's
+    /// evenly, so the true path strays up to 0.38 of the clip from the diagonal.
+    struct Cubic;
+
+    impl FeatureKind for Cubic {
+        fn name(&self) -> &'static str {
+            "cubic"
+        }
+        fn extract(&self, clip: &Clip) -> Result<crate::Features> {
+            let n = clip.images.len();
+            let power = if clip.domain == milv_data::Domain::Human {
+                3
+            } else {
+                1
+            };
+            crate::Features::new(
+                n,
+                1,
+                (0..n).map(|t| (t as f64 / (n - 1) as f64).powi(power)).collect(),
+            )
+        }
+        fn untrusted_cost(&self) -> f64 {
+            0.1
+        }
+    }
+
+    #[test]
+    fn a_path_along_the_band_edge_is_aligned_again_in_a_wider_band() {
         let (h, r) = (
-            clip(milv_data::Domain::Human, 12),
-            clip(milv_data::Domain::Robot, 15),
+            blank(milv_data::Domain::Human, 40),
+            blank(milv_data::Domain::Robot, 40),
         );
-        align_pair(&Cascade(cascade), &h, &r, &AlignOptions::default()).map(|f| f.kind.name())
+        let truth: Vec<usize> = (0..40)
+            .map(|i| (39.0 * (i as f64 / 39.0).powi(3)).round() as usize)
+            .collect();
+        let error = |opts: &AlignOptions| {
+            let fit = align_pair(&Cubic, &h, &r, opts).expect("aligned");
+            let got = fit.correspondence(opts).expect("decoded").human_to_robot;
+            (
+                fit.band,
+                fit.trusted(None),
+                frame_errors(&got, &truth).0.expect("frames"),
+            )
+        };
+        // Never widened: the band cuts the path short, and the pair is flagged.
+        let narrow = AlignOptions {
+            band: 0.1,
+            max_band: 0.1,
+            ..AlignOptions::default()
+        };
+        let (band, trusted, err) = error(&narrow);
+        assert!(band == 0.1 && !trusted && err > 3.0, "{band} {trusted} {err}");
+        // Widened 0.1 at a time until the path leaves the edge.
+        let wide = AlignOptions {
+            max_band: 0.5,
+            ..narrow
+        };
+        let (band, trusted, err) = error(&wide);
+        assert!(band > 0.35 && band <= 0.5 + 1e-9, "{band}");
+        assert!(trusted && err < 0.5, "{trusted} {err}");
     }
 
     #[test]

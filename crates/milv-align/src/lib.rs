@@ -11,7 +11,7 @@
 //! | [`motion`] | tip tracking from frame differences, table-plane rectification, track filters |
 //! | [`klt`] | feature-point tracking (Shi–Tomasi + pyramidal Lucas–Kanade) of the most travelled points |
 //! | [`track`] | the `track` kind: the human's tracked hand vs the robot's states through a per-pair affine camera |
-//! | [`align`] | [`align_dataset`]: every pair of a dataset version, in parallel, into the `alignments` table; per-pair summaries and ground-truth errors |
+//! | [`align`] | [`align_dataset`]: every pair of a dataset version, in parallel, into the `alignments` table, each pair in a band widened while its path runs along the edge; per-pair summaries and ground-truth errors |
 
 pub mod align;
 pub mod dtw;
