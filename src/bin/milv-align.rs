@@ -346,13 +346,14 @@ fn run(args: Args) -> anyhow::Result<u8> {
                 h.n,
                 r.n,
                 &format!(
-                    "pair {pair}: {} cost, normalised {:.4}",
+                    "pair {pair}: {} cost, normalised {:.4}, band {:.1}",
                     if fit.kind.name() == kind.name() {
                         kind.name().to_string()
                     } else {
                         format!("{} → {}", kind.name(), fit.kind.name())
                     },
-                    al.normalized
+                    al.normalized,
+                    fit.band
                 ),
                 "robot frame",
                 "human frame",

@@ -380,7 +380,8 @@ fn align_with<'k>(
     let mut band = opts.band;
     loop {
         let fit = fit_in_band(kind, &h, r.clone(), band, opts)?;
-        let wider = (band + BAND_STEP).min(opts.max_band.max(opts.band));
+        // Rounded so that reports say 0.3, not 0.30000000000000004.
+        let wider = (((band + BAND_STEP) * 1e9).round() / 1e9).min(opts.max_band.max(opts.band));
         if fit.band_edge <= EDGE_MAX || wider <= band + 1e-9 {
             return Ok(fit);
         }
