@@ -18,7 +18,7 @@ use milv::data::{CommitMeta, Dataset, DatasetRef, Partition};
 /// band used, and a trust flag for pairs whose cost is high or whose path runs along the
 /// widest band's edge.
 ///
-///   milv-align DATASET[@V] [--features auto|motion|track|state|translated] [--band F] [--jobs N]
+///   milv-align DATASET[@V] [--features auto|motion|track|state|translated] [--band F] [--max-band F] [--jobs N]
 ///
 ///   milv-align show DATASET[@V] PAIR -o cost.png
 #[derive(Parser, Debug)]
@@ -134,7 +134,7 @@ enum Cmd {
 fn options(c: &Common) -> AlignOptions {
     AlignOptions {
         band: c.band,
-        max_band: c.max_band.unwrap_or(c.band.max(milv_align::align::MAX_BAND)),
+        max_band: c.max_band.unwrap_or(milv_align::align::MAX_BAND),
         step: c.step,
         model_id: c.model_id.clone(),
         max_cost: c.max_cost,
@@ -346,7 +346,7 @@ fn run(args: Args) -> anyhow::Result<u8> {
                 h.n,
                 r.n,
                 &format!(
-                    "pair {pair}: {} cost, normalised {:.4}, band {:.1}",
+                    "pair {pair}: {} cost, normalised {:.4}, band {}",
                     if fit.kind.name() == kind.name() {
                         kind.name().to_string()
                     } else {

@@ -2,8 +2,8 @@
 """Diagnostic ladder for alignment features on a set made by paired_arms.py: how well
 could a feature do if it tracked the end effector perfectly?
 
-Each rung aligns every pair with the same DTW as milv-align (symmetric2, band 0.2 of the
-longer clip) on features computed from the sidecars' true end-effector positions, and
+Each rung aligns every pair with the same DTW as `milv-align --max-band 0.2` (symmetric2,
+a fixed band of 0.2 of the longer clip) on features computed from the sidecars' true end-effector positions, and
 prints the mean |frame error| against warps.jsonl beside the proportional warp's:
 
   prop            stretching one clip onto the other (the baseline)

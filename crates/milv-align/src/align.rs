@@ -37,6 +37,11 @@ pub struct AlignOptions {
 }
 
 impl AlignOptions {
+    /// The widest band a pair may be aligned in: `max_band`, or `band` if that is wider.
+    pub fn widest_band(&self) -> f64 {
+        self.max_band.max(self.band)
+    }
+
     /// Refuses a band or temperature outside its range, naming the option.
     pub fn validate(&self) -> Result<()> {
         if !(self.band > 0.0 && self.band <= 1.0) {
@@ -226,21 +231,15 @@ fn resolve_model(ds: &Dataset, v: u64, wanted: Option<&str>) -> Result<String> {
     }
 }
 
-/// The half-width in columns of a band `band` (fraction of the longer clip) wide for clips
-/// of `n` and `m` frames.
-fn band_width(n: usize, m: usize, band: f64) -> usize {
-    (band * n.max(m) as f64).ceil() as usize
+/// The Sakoe–Chiba band for clips of `n` and `m` frames, its half-width `band` of the
+/// longer clip.
+fn band_for(n: usize, m: usize, band: f64) -> Band {
+    Band::around_diagonal(n, m, (band * n.max(m) as f64).ceil() as usize)
 }
 
 /// DTW of two feature matrices in a band `band` wide, with the run's step pattern.
 fn banded_dtw(a: &crate::Features, b: &crate::Features, band: f64, opts: &AlignOptions) -> Result<Alignment> {
-    dtw(
-        a,
-        b,
-        &Band::around_diagonal(a.n, b.n, band_width(a.n, b.n, band)),
-        opts.step,
-        true,
-    )
+    dtw(a, b, &band_for(a.n, b.n, band), opts.step, true)
 }
 
 /// One pair aligned: the best path, both clips' features (the robot's fitted to the
@@ -292,8 +291,7 @@ impl PairFit<'_> {
                     .collect(),
             });
         }
-        let band = Band::around_diagonal(h.n, r.n, band_width(h.n, r.n, self.band));
-        let rows = posterior_medians(h, r, &band, opts.step, t)?;
+        let rows = posterior_medians(h, r, &band_for(h.n, r.n, self.band), opts.step, t)?;
         let cells = staircase(&rows, r.n)
             .into_iter()
             .map(|(i, j)| (i, j, crate::dtw::sq_dist(h.row(i), r.row(j))))
@@ -312,7 +310,7 @@ impl PairFit<'_> {
 /// alignment, if any; when no stage's kind explains the pair within its bound, the first that
 /// explains it, else the last that aligned it at all (so a pair is not flagged for the
 /// sake of a kind that explains it worse). The band's edge plays no part in the cascade:
-/// both kinds share the band, and a strong warp puts either's path near its edge.
+/// a strong warp puts any kind's path near the edge (each kind widens its own band).
 fn align_pair<'k>(
     kind: &'k dyn FeatureKind,
     human: &Clip,
@@ -377,15 +375,19 @@ fn align_with<'k>(
     let r = kind.extract(robot).map_err(|e| e.to_string())?;
     // A path along the band's edge may have been cut short by it: the clips' warp is
     // stronger than the band allows, so the pair is aligned again in a wider one.
-    let mut band = opts.band;
+    let mut fit = fit_in_band(kind, &h, r.clone(), opts.band, opts)?;
     loop {
-        let fit = fit_in_band(kind, &h, r.clone(), band, opts)?;
-        // Rounded so that reports say 0.3, not 0.30000000000000004.
-        let wider = (((band + BAND_STEP) * 1e9).round() / 1e9).min(opts.max_band.max(opts.band));
-        if fit.band_edge <= EDGE_MAX || wider <= band + 1e-9 {
+        // Rounded: 0.2 + 0.1 is 0.30000000000000004 in floating point, a column more than
+        // 0.3 of 80 frames.
+        let wider = (((fit.band + BAND_STEP) * 1e9).round() / 1e9).min(opts.widest_band());
+        if fit.band_edge <= EDGE_MAX || wider <= fit.band + 1e-9 {
             return Ok(fit);
         }
-        band = wider;
+        // A wider band that cannot be aligned in leaves the narrower one's fit.
+        match fit_in_band(kind, &h, r.clone(), wider, opts) {
+            Ok(next) => fit = next,
+            Err(_) => return Ok(fit),
+        }
     }
 }
 
@@ -406,20 +408,13 @@ fn fit_in_band<'k>(
     if h.d != r.d {
         return Err(format!("feature widths differ: human {} and robot {}", h.d, r.d));
     }
-    let (n, m) = (h.n, r.n);
-    let w = band_width(n, m, band);
-    let al = banded_dtw(&h, &r, band, opts).map_err(|e| e.to_string())?;
+    let b = band_for(h.n, r.n, band);
+    let al = dtw(&h, &r, &b, opts.step, true).map_err(|e| e.to_string())?;
+    // The first and last columns are every path's, not the band's limit.
     let edge = al
         .path
         .iter()
-        .filter(|&&(i, j)| {
-            let c = if n > 1 {
-                (i as f64 * (m - 1) as f64 / (n - 1) as f64).round() as usize
-            } else {
-                0
-            };
-            (j + w == c || j == c + w) && j != 0 && j != m - 1
-        })
+        .filter(|&&(i, j)| b.on_edge(i, j) && j != 0 && j != r.n - 1)
         .count() as f64
         / al.path.len() as f64;
     Ok(PairFit {
@@ -513,7 +508,7 @@ pub fn align_dataset(
         kind.name().into(),
         format!("{:?}", opts.step),
         opts.band.to_string(),
-        format!("max band {}", opts.max_band),
+        format!("max band {}", opts.widest_band()),
         format!("posterior {}", opts.temperature),
     ];
     parts.extend(model.clone());
@@ -641,7 +636,7 @@ pub fn align_dataset(
         return Ok(report);
     }
     meta.summary = serde_json::json!({
-        "run_id": run_id, "features": kind.name(), "band": opts.band, "max_band": opts.max_band, "step": opts.step,
+        "run_id": run_id, "features": kind.name(), "band": opts.band, "max_band": opts.widest_band(), "step": opts.step,
         "temperature": opts.temperature, "model_id": model,
         "pairs": report.pairs.len(), "failed": report.failed.len(), "rows": report.rows,
         "untrusted": report.pairs.iter().filter(|p| !p.trusted).map(|p| &p.pair_id).collect::<Vec<_>>(),
@@ -881,13 +876,24 @@ mod tests {
         };
         let (band, trusted, err) = error(&narrow);
         assert!(band == 0.1 && !trusted && err > 3.0, "{band} {trusted} {err}");
-        // Widened 0.1 at a time until the path leaves the edge.
-        let wide = AlignOptions {
-            max_band: 0.5,
-            ..narrow
+        // A max_band below the band: never widened either.
+        let below = AlignOptions {
+            max_band: 0.05,
+            ..narrow.clone()
         };
-        let (band, trusted, err) = error(&wide);
-        assert!(band > 0.35 && band <= 0.5 + 1e-9, "{band}");
+        assert_eq!(error(&below).0, 0.1);
+        // Widened 0.1 at a time, up to max_band: still on the edge at 0.3, flagged ...
+        let (band, trusted, _) = error(&AlignOptions {
+            max_band: 0.3,
+            ..narrow.clone()
+        });
+        assert!(band == 0.3 && !trusted, "{band} {trusted}");
+        // ... off it at 0.4, where widening stops below max_band.
+        let (band, trusted, err) = error(&AlignOptions {
+            max_band: 0.6,
+            ..narrow
+        });
+        assert_eq!(band, 0.4);
         assert!(trusted && err < 0.5, "{trusted} {err}");
     }
 

@@ -134,6 +134,11 @@ impl Band {
         }
     }
 
+    /// Whether cell (i, j) is on the band's first or last column of row i.
+    pub fn on_edge(&self, i: usize, j: usize) -> bool {
+        j == self.lo[i] || j == self.hi[i]
+    }
+
     pub fn cells(&self) -> usize {
         self.lo.iter().zip(&self.hi).map(|(l, h)| h + 1 - l).sum()
     }
