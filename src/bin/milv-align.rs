@@ -242,6 +242,13 @@ fn run_align(a: RunArgs) -> anyhow::Result<u8> {
                 num(p.proportional_mean_error),
             );
         }
+        let widened = rep.pairs.iter().filter(|p| p.band > opts.band).count();
+        let untrusted = rep.pairs.iter().filter(|p| !p.trusted).count();
+        println!(
+            "{untrusted} of {} pairs untrusted; {widened} aligned in a band wider than --band {} (their path ran along its edge)",
+            rep.pairs.len(),
+            opts.band
+        );
         if let (Some(m), Some(x), Some(pm)) = (
             rep.mean_frame_error,
             rep.max_frame_error,

@@ -214,6 +214,7 @@ fn load_clips(
                 states: r.all_vectors(),
                 images: r.images,
                 tip_cache: Default::default(),
+                points_cache: Default::default(),
             };
             (id, clip)
         })
@@ -821,6 +822,7 @@ mod tests {
             images: vec![vec![0; 3]; n],
             states: None,
             tip_cache: Default::default(),
+            points_cache: Default::default(),
         }
     }
 

@@ -9,7 +9,7 @@
 use milv_data::frame_codec::{self, FrameEncoding};
 
 use crate::dtw::Features;
-use crate::{Error, motion};
+use crate::{Error, klt, motion};
 
 /// One clip as stored: encoded frames (from `frames`, or `imagined` for translated human
 /// clips) and, when the episode has them, per-frame state vectors.
@@ -25,6 +25,9 @@ pub struct Clip {
     /// The frame-difference tip per frame, once found ([`Clip::tips`]): `auto` needs it for
     /// motion and again as [`crate::track::HandTrack`]'s yardstick on the same clip.
     pub(crate) tip_cache: std::sync::OnceLock<Option<Vec<(f64, f64)>>>,
+    /// The human's tracked points with both seeds, once asked for points seeded through the
+    /// clip ([`Clip::hand_tracks`]): `auto` tries both on the same clip.
+    pub(crate) points_cache: std::sync::OnceLock<[Option<klt::Tracks>; 2]>,
 }
 
 impl Clip {
@@ -80,6 +83,27 @@ impl Clip {
                 tracker.finish().map(|t| t.tips)
             })
             .as_deref()
+    }
+
+    /// [`klt::hand_tracks`] of this clip, decoded as `frames`. Points seeded through the
+    /// clip are tracked with the first frame's (which they include) and both kept; the
+    /// first frame's alone are tracked alone unless already kept.
+    pub(crate) fn hand_tracks(
+        &self,
+        frames: &[Vec<u8>],
+        w: usize,
+        h: usize,
+        seeds: klt::Seeds,
+    ) -> Option<klt::Tracks> {
+        let index = |s| usize::from(s == klt::Seeds::Through);
+        match (self.points_cache.get(), seeds) {
+            (Some(both), _) => both[index(seeds)].clone(),
+            (None, klt::Seeds::First) => klt::hand_tracks(frames, w, h, seeds),
+            (None, klt::Seeds::Through) => self
+                .points_cache
+                .get_or_init(|| klt::hand_tracks_both(frames, w, h))[1]
+                .clone(),
+        }
     }
 
     /// The state vectors as rows of one width; `hint` says what to use instead.
@@ -470,6 +494,7 @@ mod tests {
             images,
             states: None,
             tip_cache: Default::default(),
+            points_cache: Default::default(),
         }
     }
 

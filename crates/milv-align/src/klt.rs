@@ -282,6 +282,9 @@ fn motion_mask(frames: &[Vec<u8>], w: usize, h: usize) -> Vec<bool> {
     grown
 }
 
+/// Tracked points: per point, its pixel position (x right, y down) in every frame.
+pub type Tracks = Vec<Vec<(f64, f64)>>;
+
 /// Which frames' corners seed points.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Seeds {
@@ -300,36 +303,77 @@ pub enum Seeds {
 /// When a point the tracker lost had travelled farther before it was lost than every
 /// point that survived, the hand itself was lost and the survivors are on the slower
 /// shoulder or torso: the clip is tracked again with the coarse window (15×15 on 4 levels).
-pub fn hand_tracks(frames: &[Vec<u8>], w: usize, h: usize, seeds: Seeds) -> Option<Vec<Vec<(f64, f64)>>> {
-    if frames.len() < 2 {
-        return None;
+pub fn hand_tracks(frames: &[Vec<u8>], w: usize, h: usize, seeds: Seeds) -> Option<Tracks> {
+    Tracker::new(frames, w, h)?.tracks(seeds)
+}
+
+/// [`hand_tracks`] with both seeds, `(First, Through)`: the first frame's corners, which
+/// both follow, are followed once.
+pub fn hand_tracks_both(frames: &[Vec<u8>], w: usize, h: usize) -> [Option<Tracks>; 2] {
+    match Tracker::new(frames, w, h) {
+        Some(mut t) => [t.tracks(Seeds::First), t.tracks(Seeds::Through)],
+        None => [None, None],
     }
-    let mask = motion_mask(frames, w, h);
-    // One pyramid per frame serves both windows (the fine one uses its lower levels).
-    let pyr: Vec<Pyramid> = frames
-        .iter()
-        .map(|f| Pyramid::new(Gray::from_rgb(f, w, h), COARSE.levels))
-        .collect();
-    let every = match seeds {
-        Seeds::First => pyr.len(),
-        Seeds::Through => SEED_EVERY,
-    };
-    let track_all = |window: Window| {
+}
+
+/// A clip's pyramids and motion mask, and the points followed from each seed frame with
+/// each window so far.
+struct Tracker {
+    mask: Vec<bool>,
+    pyr: Vec<Pyramid>,
+    /// (seed frame, coarse window?) → its points followed.
+    followed: std::collections::HashMap<(usize, bool), Followed>,
+}
+
+impl Tracker {
+    /// `None` for fewer than 2 frames.
+    fn new(frames: &[Vec<u8>], w: usize, h: usize) -> Option<Tracker> {
+        if frames.len() < 2 {
+            return None;
+        }
+        Some(Tracker {
+            mask: motion_mask(frames, w, h),
+            // One pyramid per frame serves both windows (the fine one uses its lower levels).
+            pyr: frames
+                .iter()
+                .map(|f| Pyramid::new(Gray::from_rgb(f, w, h), COARSE.levels))
+                .collect(),
+            followed: std::collections::HashMap::new(),
+        })
+    }
+
+    /// The most travelled points seeded as `seeds` says (see [`hand_tracks`]).
+    fn tracks(&mut self, seeds: Seeds) -> Option<Tracks> {
+        let every = match seeds {
+            Seeds::First => self.pyr.len(),
+            Seeds::Through => SEED_EVERY,
+        };
+        let fine = self.all_from(every, false);
+        let followed = if fine.hand_lost() {
+            self.all_from(every, true)
+        } else {
+            fine
+        };
+        followed.top()
+    }
+
+    /// The points of every `every`th frame's corners, followed with the fine or coarse window.
+    fn all_from(&mut self, every: usize, coarse: bool) -> Followed {
         let mut all = Followed {
             tracks: Vec::new(),
             alive: Vec::new(),
         };
-        for k in (0..pyr.len()).step_by(every) {
-            let (_, gx, gy) = &pyr[k].levels[0];
-            let more = follow(&pyr, k, &corners(gx, gy, &mask), window);
-            all.tracks.extend(more.tracks);
-            all.alive.extend(more.alive);
+        for k in (0..self.pyr.len()).step_by(every) {
+            let (pyr, mask) = (&self.pyr, &self.mask);
+            let more = self.followed.entry((k, coarse)).or_insert_with(|| {
+                let (_, gx, gy) = &pyr[k].levels[0];
+                follow(pyr, k, &corners(gx, gy, mask), if coarse { COARSE } else { FINE })
+            });
+            all.tracks.extend(more.tracks.iter().cloned());
+            all.alive.extend(more.alive.iter().copied());
         }
         all
-    };
-    let fine = track_all(FINE);
-    let followed = if fine.hand_lost() { track_all(COARSE) } else { fine };
-    followed.top()
+    }
 }
 
 /// Points followed through a clip.
@@ -392,7 +436,7 @@ impl Followed {
     }
 
     /// The [`TOP_POINTS`] most travelled surviving tracks, farthest first.
-    fn top(mut self) -> Option<Vec<Vec<(f64, f64)>>> {
+    fn top(mut self) -> Option<Tracks> {
         let mut travelled: Vec<(f64, usize)> = self
             .tracks
             .iter()
@@ -533,6 +577,10 @@ mod tests {
         let frames: Vec<Vec<u8>> = path.iter().map(|&(x, y)| frame(w, h, x, y)).collect();
         let through = hand_tracks(&frames, w, h, Seeds::Through).unwrap();
         assert_eq!(through.len(), TOP_POINTS);
+        // Both seeds in one pass (the first frame's points followed once): the same tracks.
+        let both = hand_tracks_both(&frames, w, h);
+        assert_eq!(both[0], hand_tracks(&frames, w, h, Seeds::First));
+        assert_eq!(both[1].as_ref(), Some(&through));
         for track in through {
             let off = (track[0].0 - path[0].0, track[0].1 - path[0].1);
             assert!(off.0.hypot(off.1) < 12.0, "{track:?}");

@@ -236,7 +236,7 @@ fn alternate(
 fn human_features(clip: &Clip, yardstick: Option<&HandTrack>) -> Result<Features, Error> {
     let (frames, w, h) = clip.all_rgb()?;
     let n = frames.len();
-    let points = klt::hand_tracks(&frames, w, h, yardstick.map_or(klt::Seeds::First, |y| y.seeds));
+    let points = clip.hand_tracks(&frames, w, h, yardstick.map_or(klt::Seeds::First, |y| y.seeds));
     let tip = || {
         clip.tips(&frames, w, h).map(<[_]>::to_vec).ok_or_else(|| {
             Error::Invalid(format!(
@@ -534,6 +534,7 @@ mod tests {
             images: vec![],
             states: None,
             tip_cache: Default::default(),
+            points_cache: Default::default(),
         };
         let e = Track.extract(&clip).unwrap_err().to_string();
         assert!(e.contains("r7") && e.contains("no state vectors"), "{e}");
@@ -564,6 +565,7 @@ mod tests {
             images: still,
             states: None,
             tip_cache: Default::default(),
+            points_cache: Default::default(),
         };
         let e = HandTrack::ON_HAND.extract(&clip).unwrap_err().to_string();
         assert!(e.contains("h3") && e.contains("no tracked point"), "{e}");
