@@ -85,25 +85,30 @@ impl Clip {
             .as_deref()
     }
 
-    /// [`klt::hand_tracks`] of this clip, decoded as `frames`. Points seeded through the
-    /// clip are tracked with the first frame's (which they include) and both kept; the
-    /// first frame's alone are tracked alone unless already kept.
-    pub(crate) fn hand_tracks(
-        &self,
-        frames: &[Vec<u8>],
-        w: usize,
-        h: usize,
-        seeds: klt::Seeds,
-    ) -> Option<klt::Tracks> {
-        let index = |s| usize::from(s == klt::Seeds::Through);
-        match (self.points_cache.get(), seeds) {
-            (Some(both), _) => both[index(seeds)].clone(),
-            (None, klt::Seeds::First) => klt::hand_tracks(frames, w, h, seeds),
-            (None, klt::Seeds::Through) => self
-                .points_cache
-                .get_or_init(|| klt::hand_tracks_both(frames, w, h))[1]
-                .clone(),
+    /// [`klt::hand_tracks`] of this clip, decoding its frames only when not already kept.
+    /// Points seeded through the clip are tracked with the first frame's (which they
+    /// include) and both kept; the first frame's alone are tracked alone unless kept.
+    pub(crate) fn hand_tracks(&self, seeds: klt::Seeds) -> Result<Option<klt::Tracks>, Error> {
+        if let Some(both) = self.points_cache.get() {
+            return Ok(both[usize::from(seeds == klt::Seeds::Through)].clone());
         }
+        let (frames, w, h) = self.all_rgb()?;
+        Ok(match seeds {
+            klt::Seeds::First => klt::hand_tracks(&frames, w, h, seeds),
+            klt::Seeds::Through => self
+                .points_cache
+                .get_or_init(|| klt::hand_tracks_both(&frames, w, h))[1]
+                .clone(),
+        })
+    }
+
+    /// [`Clip::tips`], decoding the frames only when the tips are not already found.
+    pub(crate) fn tips_decoded(&self) -> Result<Option<&[(f64, f64)]>, Error> {
+        if let Some(t) = self.tip_cache.get() {
+            return Ok(t.as_deref());
+        }
+        let (frames, w, h) = self.all_rgb()?;
+        Ok(self.tips(&frames, w, h))
     }
 
     /// The state vectors as rows of one width; `hint` says what to use instead.

@@ -234,11 +234,11 @@ fn alternate(
 /// The human clip's tracked points as `[progress, x₁, y₁, …]`; with a [`HandTrack`]
 /// yardstick, refused unless the points travel far enough against the frame-difference tip.
 fn human_features(clip: &Clip, yardstick: Option<&HandTrack>) -> Result<Features, Error> {
-    let (frames, w, h) = clip.all_rgb()?;
-    let n = frames.len();
-    let points = clip.hand_tracks(&frames, w, h, yardstick.map_or(klt::Seeds::First, |y| y.seeds));
+    // Each of the clip's calls decodes its frames only for what it has not found before.
+    let n = clip.images.len();
+    let points = clip.hand_tracks(yardstick.map_or(klt::Seeds::First, |y| y.seeds))?;
     let tip = || {
-        clip.tips(&frames, w, h).map(<[_]>::to_vec).ok_or_else(|| {
+        clip.tips_decoded()?.map(<[_]>::to_vec).ok_or_else(|| {
             Error::Invalid(format!(
                 "episode {}: nothing moves in the clip (track features need a moving arm)",
                 clip.episode_id
