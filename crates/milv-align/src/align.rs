@@ -853,6 +853,31 @@ mod tests {
     }
 
     #[test]
+    fn bands_outside_their_range_are_refused_by_name() {
+        for (band, max_band, named) in [
+            (0.0, 0.4, "--band 0"),
+            (0.2, 1.5, "--max-band 1.5"),
+            (0.2, 0.0, "--max-band 0"),
+        ] {
+            let opts = AlignOptions {
+                band,
+                max_band,
+                ..AlignOptions::default()
+            };
+            let err = opts.validate().expect_err("refused").to_string();
+            assert!(err.contains(named), "{err}");
+        }
+        // At most the band (never widened) and the widest, 1, are fine.
+        for max_band in [0.1, 1.0] {
+            let opts = AlignOptions {
+                max_band,
+                ..AlignOptions::default()
+            };
+            assert!(opts.validate().is_ok(), "{max_band}");
+        }
+    }
+
+    #[test]
     fn a_path_along_the_band_edge_is_aligned_again_in_a_wider_band() {
         let (h, r) = (
             blank(milv_data::Domain::Human, 40),
