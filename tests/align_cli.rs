@@ -71,7 +71,7 @@ fn simulated_pairs_align_within_the_goals() {
             for p in pairs {
                 let kind = p["features"].as_str().unwrap();
                 let allowed: &[&str] = if features == "auto" {
-                    &["motion", "track"]
+                    &["motion", "motion-hand", "track"]
                 } else {
                     &[features]
                 };

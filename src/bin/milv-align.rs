@@ -63,7 +63,8 @@ struct Common {
     /// alignment is kept, flagged if untrusted); where motion fits, track instead when its
     /// path stays off the band's edge and its points travel as far as motion's tip (on the
     /// hand; points seeded through the clip or in its first frame, whichever fit costs
-    /// less); the report names the kind used per pair;
+    /// less), else motion-hand (motion's features from the hand region, deeper than the
+    /// tip, nearer the end effector); the report names the kind used per pair;
     /// motion: progress and heading of the arm's tip, tracked from frame differences and
     /// mapped onto the table plane (any clip); track: the human's hand followed by image
     /// feature points, against the robot's end-effector states mapped into the human's

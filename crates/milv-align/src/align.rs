@@ -308,7 +308,8 @@ impl PairFit<'_> {
 /// ([`FeatureKind::cascade`]), with the first of its stages whose cost stays within its
 /// bound and explains the pair ([`PairFit::explained`]), replaced by its
 /// [`unless_trusted`](crate::features::Stage::unless_trusted) kinds' lowest-cost trusted
-/// alignment, if any; when no stage's kind explains the pair within its bound, the first that
+/// alignment, if any, else by its [`aligned_by`](crate::features::Stage::aligned_by) kind's
+/// where trusted; when no stage's kind explains the pair within its bound, the first that
 /// explains it, else the last that aligned it at all (so a pair is not flagged for the
 /// sake of a kind that explains it worse). The band's edge plays no part in the cascade:
 /// a strong warp puts any kind's path near the edge (each kind widens its own band).
@@ -332,7 +333,13 @@ fn align_pair<'k>(
                     .filter_map(|&k| align_with(k, human, robot, opts).ok())
                     .filter(|f| f.trusted(opts.max_cost))
                     .min_by(|a, b| a.cost_per_dim().total_cmp(&b.cost_per_dim()));
-                return Ok(better.unwrap_or(fit));
+                let again = || {
+                    stage
+                        .aligned_by
+                        .and_then(|k| align_with(k, human, robot, opts).ok())
+                        .filter(|f| f.trusted(opts.max_cost))
+                };
+                return Ok(better.or_else(again).unwrap_or(fit));
             }
             Ok(fit) => fits.push(fit),
             Err(e) => errors.push(format!("{}: {e}", stage.kind.name())),
@@ -792,6 +799,15 @@ mod tests {
         cascade: &[(&'static dyn FeatureKind, f64)],
         unless: &[&'static dyn FeatureKind],
     ) -> std::result::Result<&'static str, String> {
+        picked_with(cascade, unless, None)
+    }
+
+    /// [`picked_unless`], the first stage aligned again by `aligned_by`.
+    fn picked_with(
+        cascade: &[(&'static dyn FeatureKind, f64)],
+        unless: &[&'static dyn FeatureKind],
+        aligned_by: Option<&'static dyn FeatureKind>,
+    ) -> std::result::Result<&'static str, String> {
         // A kind's cascade is static; a test's may leak.
         let unless: &'static [&'static dyn FeatureKind] = Box::leak(unless.to_vec().into_boxed_slice());
         let stages: Vec<Stage> = cascade
@@ -801,6 +817,7 @@ mod tests {
                 kind,
                 keep_below,
                 unless_trusted: if i == 0 { unless } else { &[] },
+                aligned_by: if i == 0 { aligned_by } else { None },
             })
             .collect();
         let cascade = Box::leak(stages.into_boxed_slice());
@@ -964,5 +981,20 @@ mod tests {
         // Only a kept stage is replaced: past its bound, the next stage decides.
         let past: &[(&'static dyn FeatureKind, f64)] = &[(&FAR, 0.01), (&NEAR, f64::INFINITY)];
         assert_eq!(picked_unless(past, &[&EXACT]), Ok("near"));
+    }
+
+    #[test]
+    fn a_kept_stage_is_aligned_again_by_its_aligned_by_kind_where_trusted() {
+        let cascade: &[(&'static dyn FeatureKind, f64)] = &[(&NEAR, 0.01), (&FAR, f64::INFINITY)];
+        assert_eq!(picked_with(cascade, &[], Some(&FAR)), Ok("far"));
+        // Untrusted, or cannot align: the kept alignment stands.
+        assert_eq!(picked_with(cascade, &[], Some(&FAR_UNTRUSTED)), Ok("near"));
+        assert_eq!(picked_with(cascade, &[], Some(&BROKEN)), Ok("near"));
+        // A trusted unless kind comes first.
+        assert_eq!(picked_with(cascade, &[&EXACT], Some(&FAR)), Ok("exact"));
+        assert_eq!(picked_with(cascade, &[&FAR_UNTRUSTED], Some(&FAR)), Ok("far"));
+        // Past its bound, the next stage decides.
+        let past: &[(&'static dyn FeatureKind, f64)] = &[(&FAR, 0.01), (&NEAR, f64::INFINITY)];
+        assert_eq!(picked_with(past, &[], Some(&EXACT)), Ok("near"));
     }
 }

@@ -185,6 +185,9 @@ pub struct Stage {
     /// one with the lowest cost per dimension; a kind that cannot align the pair is passed
     /// over.
     pub unless_trusted: &'static [&'static dyn FeatureKind],
+    /// Where none of those replaces a kept alignment, the kind that aligns the pair again
+    /// (the kept one stands if it cannot): `kind`'s cost decides, this kind aligns.
+    pub aligned_by: Option<&'static dyn FeatureKind>,
 }
 
 /// The DTW a pair is aligned with (its band and step pattern), as the robot frame of
@@ -231,7 +234,24 @@ impl FeatureKind for State {
 /// apart stretches of equal progress that go different ways. The two tables are the same
 /// square seen from different sides, so [`FeatureKind::fit_pair`] turns the robot's
 /// headings by the symmetry of the square that best matches the human's.
-pub struct Motion;
+///
+/// Two points of the moving region are followed: its tip (the farthest part, `motion`) and
+/// the hand region (deeper, [`Motion::HAND`]). The tip leads the end effector by the
+/// hand's fingers, more for a hand than for a gripper and more where the arm turns, so
+/// its progress runs ahead of the end effector's; the hand region's centre is nearer the
+/// end effector and aligns milv-sim's pairs better (BENCHMARKS.md, "Motion's progress
+/// from the hand region").
+pub struct Motion {
+    hand: bool,
+}
+
+impl Motion {
+    /// The tip's progress and heading (`--features motion`).
+    pub const TIP: Motion = Motion { hand: false };
+    /// The hand region's (`motion-hand`): what `auto` aligns a pair with where motion's
+    /// tip explains it (whose cost its bound was measured on).
+    pub const HAND: Motion = Motion { hand: true };
+}
 
 /// Weight of the two heading columns against progress (measured on milv-sim pairs: more
 /// than ~0.2 lets heading noise pull the path off).
@@ -240,7 +260,7 @@ const MOTION_D: usize = 3;
 
 impl FeatureKind for Motion {
     fn name(&self) -> &'static str {
-        "motion"
+        if self.hand { "motion-hand" } else { "motion" }
     }
 
     fn untrusted_cost(&self) -> f64 {
@@ -267,7 +287,8 @@ impl FeatureKind for Motion {
         let plane = motion::table_quad(&track.background, w, h)
             .and_then(|q| motion::to_unit_square(&q))
             .unwrap_or_else(|| milv_geom::Homography::scale(1.0 / w as f64, 1.0 / h as f64));
-        let on_table: Vec<(f64, f64)> = track.tips.iter().map(|&p| plane.apply(p)).collect();
+        let followed = if self.hand { &track.hands } else { &track.tips };
+        let on_table: Vec<(f64, f64)> = followed.iter().map(|&p| plane.apply(p)).collect();
         let clean = |c: fn(&(f64, f64)) -> f64| {
             let v: Vec<f64> = on_table.iter().map(c).collect();
             motion::gaussian_filter(&motion::median_filter(&v, 5), 2.5)
@@ -404,7 +425,9 @@ impl FeatureKind for Translated {
 /// vouched for the pair; BENCHMARKS.md, "Track where motion's tip vouches for its points"
 /// and "Where the tip vouches, track's cost does not veto"). Points seeded through the
 /// clip and the first frame's are tried both ([`HandTrack::ON_HAND_FIRST`]); of the
-/// alignments that qualify, the cheaper is kept.
+/// alignments that qualify, the cheaper is kept. Where neither qualifies, the pair is
+/// aligned on [`Motion::HAND`]: the tip's cost decides (the bounds were measured on it),
+/// the hand region, nearer the end effector, aligns.
 ///
 /// [`Track`]: crate::track::Track
 /// [`HandTrack::MOVING`]: crate::track::HandTrack::MOVING
@@ -431,8 +454,9 @@ impl FeatureKind for Auto {
     fn cascade(&self) -> &'static [Stage] {
         &[
             Stage {
-                kind: &Motion,
+                kind: &Motion::TIP,
                 keep_below: AUTO_MOTION_COST,
+                aligned_by: Some(&Motion::HAND),
                 unless_trusted: &[
                     &crate::track::HandTrack::ON_HAND,
                     &crate::track::HandTrack::ON_HAND_FIRST,
@@ -441,6 +465,7 @@ impl FeatureKind for Auto {
             Stage {
                 kind: &crate::track::HandTrack::MOVING,
                 keep_below: f64::INFINITY,
+                aligned_by: None,
                 unless_trusted: &[],
             },
         ]
@@ -451,7 +476,7 @@ impl FeatureKind for Auto {
 pub fn by_name(name: &str) -> Result<&'static dyn FeatureKind, Error> {
     match name {
         "auto" => Ok(&Auto),
-        "motion" => Ok(&Motion),
+        "motion" => Ok(&Motion::TIP),
         "state" => Ok(&State),
         "translated" => Ok(&Translated),
         "track" => Ok(&crate::track::Track),
@@ -512,8 +537,8 @@ mod tests {
             .iter()
             .map(|&p| 0.1 + 0.8 * (2.0 * p - 1.0).max(0.0))
             .collect();
-        let from_bottom = Motion.extract(&clip(0, &reach, &col)).unwrap();
-        let from_top = Motion.extract(&clip(1, &reach, &col)).unwrap();
+        let from_bottom = Motion::TIP.extract(&clip(0, &reach, &col)).unwrap();
+        let from_top = Motion::TIP.extract(&clip(1, &reach, &col)).unwrap();
         for f in [&from_bottom, &from_top] {
             let p: Vec<f64> = (0..f.n).map(|i| f.row(i)[0]).collect();
             assert!(p.windows(2).all(|w| w[1] >= w[0] - 1e-12), "{p:?}");
@@ -535,12 +560,12 @@ mod tests {
                 / 30.0
         };
         assert!(heading_dot(&from_top) < -0.8, "{}", heading_dot(&from_top));
-        let fitted = Motion.fit_pair(&from_bottom, from_top, &|_, _| None);
+        let fitted = Motion::TIP.fit_pair(&from_bottom, from_top, &|_, _| None);
         assert!(heading_dot(&fitted) > 0.8, "{}", heading_dot(&fitted));
         // A clip where nothing moves has no motion features.
         let still = clip(0, &[0.5; 4], &[0.3; 4]);
         assert!(
-            Motion
+            Motion::TIP
                 .extract(&still)
                 .unwrap_err()
                 .to_string()
@@ -556,7 +581,7 @@ mod tests {
         let (frames, w, h) = c.all_rgb().unwrap();
         let fresh = clip(0, &reach, &[0.4; 12]).tips(&frames, w, h).unwrap().to_vec();
         assert!(c.tip_cache.get().is_none());
-        Motion.extract(&c).unwrap();
+        Motion::TIP.extract(&c).unwrap();
         assert_eq!(c.tip_cache.get().unwrap().as_deref(), Some(&fresh[..]));
         // Found once: other frames passed later do not change it.
         assert_eq!(c.tips(&frames[..2], w, h), Some(&fresh[..]));

@@ -8,6 +8,8 @@
 //! tip's pixel position is then mapped onto the table plane through the homography of
 //! the table's image quad (detected in the clip's median frame), which undoes each
 //! camera's perspective: both clips then move in one square, up to its 8 symmetries.
+//! The hand region, reaching deeper into the moving pixels than the tip, is followed
+//! alongside: its centre is nearer the end effector.
 
 use milv_geom::Homography;
 
@@ -15,6 +17,9 @@ use milv_geom::Homography;
 const MIN_MOTION: f32 = 12.0;
 /// The tip region: moving pixels within this many pixels (at 128 px) of the farthest one.
 const TIP_BAND_128: f64 = 8.0;
+/// The hand region, deeper: its centre is nearer the end effector than the tip's (on the
+/// milv-sim sets 12 px aligned best of 8–24; BENCHMARKS.md).
+const HAND_BAND_128: f64 = 12.0;
 /// At most this many frames go into the median frame the table is found in.
 const BACKGROUND_SAMPLES: usize = 32;
 
@@ -46,6 +51,7 @@ impl Side {
 #[derive(Clone, Debug, Default)]
 struct FrameMotion {
     tips: [Option<(f64, f64)>; 4],
+    hands: [Option<(f64, f64)>; 4],
     border: [usize; 4],
 }
 
@@ -104,22 +110,26 @@ fn frame_motion(d: &[f32], w: usize, h: usize) -> FrameMotion {
     if moving.len() < 3 {
         return fm;
     }
-    let band = (TIP_BAND_128 * w.min(h) as f64 / 128.0).round().max(2.0) as usize;
+    let px = |band: f64| (band * w.min(h) as f64 / 128.0).round().max(2.0) as usize;
     for (s, side) in SIDES.iter().enumerate() {
         let far = moving
             .iter()
             .map(|&(x, y)| side.depth(x, y, w, h))
             .max()
             .unwrap_or(0);
-        let (mut sx, mut sy, mut k) = (0.0, 0.0, 0.0);
-        for &(x, y) in &moving {
-            if side.depth(x, y, w, h) + band >= far {
-                sx += x as f64 + 0.5;
-                sy += y as f64 + 0.5;
-                k += 1.0;
+        let centre = |band: usize| {
+            let (mut sx, mut sy, mut k) = (0.0, 0.0, 0.0);
+            for &(x, y) in &moving {
+                if side.depth(x, y, w, h) + band >= far {
+                    sx += x as f64 + 0.5;
+                    sy += y as f64 + 0.5;
+                    k += 1.0;
+                }
             }
-        }
-        fm.tips[s] = Some((sx / k, sy / k));
+            (sx / k, sy / k)
+        };
+        fm.tips[s] = Some(centre(px(TIP_BAND_128)));
+        fm.hands[s] = Some(centre(px(HAND_BAND_128)));
     }
     fm
 }
@@ -130,6 +140,8 @@ pub struct Track {
     pub side: Side,
     /// One tip (pixels) per frame; frames without motion hold the nearest earlier tip.
     pub tips: Vec<(f64, f64)>,
+    /// The hand region's centre per frame, held like `tips`.
+    pub hands: Vec<(f64, f64)>,
     /// Median luma frame (of at most 32 frames spread over the clip).
     pub background: Vec<u8>,
 }
@@ -189,24 +201,29 @@ impl TipTracker {
         let totals: [usize; 4] = std::array::from_fn(|s| self.frames.iter().map(|f| f.border[s]).sum());
         // Ties (e.g. an arm that never touches the border) resolve to the bottom.
         let s = (0..4).rev().max_by_key(|&s| totals[s]).unwrap_or(0);
-        let raw: Vec<Option<(f64, f64)>> = self.frames.iter().map(|f| f.tips[s]).collect();
-        let first = raw.iter().flatten().next().copied()?;
-        let mut last = first;
-        let tips = raw
-            .iter()
-            .map(|t| {
-                if let Some(t) = t {
-                    last = *t;
-                }
-                last
-            })
-            .collect();
         Some(Track {
             side: SIDES[s],
-            tips,
+            tips: held(self.frames.iter().map(|f| f.tips[s]))?,
+            hands: held(self.frames.iter().map(|f| f.hands[s]))?,
             background: median_frame(&self.background),
         })
     }
+}
+
+/// One point per frame, frames without one holding the nearest earlier (the first frames
+/// the first found); `None` when no frame has one.
+fn held(points: impl Iterator<Item = Option<(f64, f64)>> + Clone) -> Option<Vec<(f64, f64)>> {
+    let mut last = points.clone().flatten().next()?;
+    Some(
+        points
+            .map(|p| {
+                if let Some(p) = p {
+                    last = p;
+                }
+                last
+            })
+            .collect(),
+    )
 }
 
 pub(crate) fn luma(p: &[u8]) -> u8 {
@@ -428,5 +445,25 @@ mod tests {
             t.push(vec![100u8; 16 * 16 * 3]);
         }
         assert!(t.finish().is_none());
+    }
+
+    #[test]
+    fn the_hand_region_lies_deeper_than_the_tip() {
+        // An arm from the bottom border up to row 40: a 4 px forearm under a 10 px hand.
+        let (w, h) = (128usize, 128usize);
+        let d: Vec<f32> = (0..w * h)
+            .map(|i| {
+                let (x, y) = (i % w, i / w);
+                let on =
+                    ((40..50).contains(&y) && (59..69).contains(&x)) || (y >= 50 && (62..66).contains(&x));
+                if on { 100.0 } else { 0.0 }
+            })
+            .collect();
+        let fm = frame_motion(&d, w, h);
+        let (tip, hand) = (fm.tips[0].unwrap(), fm.hands[0].unwrap());
+        // Rows 40..=48 against 40..=52 (the forearm's narrow rows weigh less).
+        assert!((tip.1 - 44.5).abs() < 1e-9, "{tip:?}");
+        assert!(hand.1 > tip.1 + 1.0 && hand.1 < 48.0, "{hand:?}");
+        assert!((tip.0 - 64.0).abs() < 1e-9 && (hand.0 - 64.0).abs() < 1e-9);
     }
 }
