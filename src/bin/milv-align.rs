@@ -18,7 +18,7 @@ use milv::data::{CommitMeta, Dataset, DatasetRef, Partition};
 /// band used, and a trust flag for pairs whose cost is high or whose path runs along the
 /// widest band's edge.
 ///
-///   milv-align DATASET[@V] [--features auto|motion|track|state|translated] [--band F] [--max-band F] [--jobs N]
+///   milv-align DATASET[@V] [--features auto|motion|motion-hand|track|state|translated] [--band F] [--max-band F] [--jobs N]
 ///
 ///   milv-align show DATASET[@V] PAIR -o cost.png
 #[derive(Parser, Debug)]
@@ -66,7 +66,8 @@ struct Common {
     /// less), else motion-hand (motion's features from the hand region, deeper than the
     /// tip, nearer the end effector); the report names the kind used per pair;
     /// motion: progress and heading of the arm's tip, tracked from frame differences and
-    /// mapped onto the table plane (any clip); track: the human's hand followed by image
+    /// mapped onto the table plane (any clip); motion-hand: the same from the hand region,
+    /// deeper in the moving pixels than the tip (nearer the end effector); track: the human's hand followed by image
     /// feature points, against the robot's end-effector states mapped into the human's
     /// view by an affine camera fitted per pair (robot clips need states; no scene
     /// assumption); state: the episodes' state vectors (e.g.

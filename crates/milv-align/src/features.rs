@@ -477,11 +477,12 @@ pub fn by_name(name: &str) -> Result<&'static dyn FeatureKind, Error> {
     match name {
         "auto" => Ok(&Auto),
         "motion" => Ok(&Motion::TIP),
+        "motion-hand" => Ok(&Motion::HAND),
         "state" => Ok(&State),
         "translated" => Ok(&Translated),
         "track" => Ok(&crate::track::Track),
         _ => Err(Error::Invalid(format!(
-            "unknown features {name:?} (auto | motion | track | state | translated)"
+            "unknown features {name:?} (auto | motion | motion-hand | track | state | translated)"
         ))),
     }
 }
@@ -606,5 +607,14 @@ mod tests {
         assert_eq!(f.row(0), [0.0, 0.0]);
         assert_eq!(f.row(1), [1.0, 1.0]);
         assert!(by_name("pixels").is_err());
+    }
+
+    #[test]
+    fn every_kind_is_named_on_the_command_line_by_its_report_name() {
+        for name in ["auto", "motion", "motion-hand", "track", "state", "translated"] {
+            assert_eq!(by_name(name).unwrap().name(), name);
+        }
+        let e = by_name("hand").err().unwrap().to_string();
+        assert!(e.contains("\"hand\"") && e.contains("motion-hand"), "{e}");
     }
 }
