@@ -213,7 +213,7 @@ fn load_clips(
                 height: if imagined { 0 } else { ep.height as u32 },
                 states: r.all_vectors(),
                 images: r.images,
-                tip_cache: Default::default(),
+                motion_cache: Default::default(),
                 points_cache: Default::default(),
             };
             (id, clip)
@@ -838,7 +838,7 @@ mod tests {
             height: 1,
             images: vec![vec![0; 3]; n],
             states: None,
-            tip_cache: Default::default(),
+            motion_cache: Default::default(),
             points_cache: Default::default(),
         }
     }

@@ -22,12 +22,21 @@ pub struct Clip {
     pub height: u32,
     pub images: Vec<Vec<u8>>,
     pub states: Option<Vec<Vec<f32>>>,
-    /// The frame-difference tip per frame, once found ([`Clip::tips`]): `auto` needs it for
-    /// motion and again as [`crate::track::HandTrack`]'s yardstick on the same clip.
-    pub(crate) tip_cache: std::sync::OnceLock<Option<Vec<(f64, f64)>>>,
+    /// The clip's frame-difference track once found ([`Clip::tips`]): `auto` reads it for
+    /// motion's tip, again for its hand region and as [`crate::track::HandTrack`]'s
+    /// yardstick, all on the same clip.
+    pub(crate) motion_cache: std::sync::OnceLock<Option<MotionTrack>>,
     /// The human's tracked points with both seeds, once asked for points seeded through the
     /// clip ([`Clip::hand_tracks`]): `auto` tries both on the same clip.
     pub(crate) points_cache: std::sync::OnceLock<[Option<klt::Tracks>; 2]>,
+}
+
+/// A clip's [`motion::Track`] and the frame size it was found at.
+#[derive(Clone, Debug)]
+pub(crate) struct MotionTrack {
+    pub track: motion::Track,
+    pub w: usize,
+    pub h: usize,
 }
 
 impl Clip {
@@ -74,15 +83,29 @@ impl Clip {
     /// The tip found from frame differences in every frame ([`motion::TipTracker`]) of
     /// this clip, decoded as `frames`, unless already found; `None` when nothing moves.
     pub fn tips(&self, frames: &[Vec<u8>], w: usize, h: usize) -> Option<&[(f64, f64)]> {
-        self.tip_cache
+        self.motion_track(frames, w, h).map(|m| &m.track.tips[..])
+    }
+
+    /// The clip's [`motion::Track`] from `frames`, unless already found.
+    fn motion_track(&self, frames: &[Vec<u8>], w: usize, h: usize) -> Option<&MotionTrack> {
+        self.motion_cache
             .get_or_init(|| {
                 let mut tracker = motion::TipTracker::new(w, h, frames.len());
                 for f in frames {
                     tracker.push(f.clone());
                 }
-                tracker.finish().map(|t| t.tips)
+                tracker.finish().map(|track| MotionTrack { track, w, h })
             })
-            .as_deref()
+            .as_ref()
+    }
+
+    /// [`Clip::motion_track`], decoding the frames only when it is not already found.
+    pub(crate) fn motion_decoded(&self) -> Result<Option<&MotionTrack>, Error> {
+        if let Some(m) = self.motion_cache.get() {
+            return Ok(m.as_ref());
+        }
+        let (frames, w, h) = self.all_rgb()?;
+        Ok(self.motion_track(&frames, w, h))
     }
 
     /// [`klt::hand_tracks`] of this clip, decoding its frames only when not already kept.
@@ -104,11 +127,7 @@ impl Clip {
 
     /// [`Clip::tips`], decoding the frames only when the tips are not already found.
     pub(crate) fn tips_decoded(&self) -> Result<Option<&[(f64, f64)]>, Error> {
-        if let Some(t) = self.tip_cache.get() {
-            return Ok(t.as_deref());
-        }
-        let (frames, w, h) = self.all_rgb()?;
-        Ok(self.tips(&frames, w, h))
+        Ok(self.motion_decoded()?.map(|m| &m.track.tips[..]))
     }
 
     /// The state vectors as rows of one width; `hint` says what to use instead.
@@ -270,20 +289,13 @@ impl FeatureKind for Motion {
     }
 
     fn extract(&self, clip: &Clip) -> Result<Features, Error> {
-        let (frames, w, h) = clip.all_rgb()?;
-        let n = frames.len();
-        let mut tracker = motion::TipTracker::new(w, h, n);
-        for f in frames {
-            tracker.push(f);
-        }
-        let track = tracker.finish();
-        let _ = clip.tip_cache.set(track.as_ref().map(|t| t.tips.clone()));
-        let track = track.ok_or_else(|| {
+        let MotionTrack { track, w, h } = clip.motion_decoded()?.ok_or_else(|| {
             Error::Invalid(format!(
                 "episode {}: nothing moves in the clip (motion features need a moving arm)",
                 clip.episode_id
             ))
         })?;
+        let (n, w, h) = (track.tips.len(), *w, *h);
         let plane = motion::table_quad(&track.background, w, h)
             .and_then(|q| motion::to_unit_square(&q))
             .unwrap_or_else(|| milv_geom::Homography::scale(1.0 / w as f64, 1.0 / h as f64));
@@ -524,7 +536,7 @@ mod tests {
             height: h as u32,
             images,
             states: None,
-            tip_cache: Default::default(),
+            motion_cache: Default::default(),
             points_cache: Default::default(),
         }
     }
@@ -581,9 +593,17 @@ mod tests {
         let c = clip(0, &reach, &[0.4; 12]);
         let (frames, w, h) = c.all_rgb().unwrap();
         let fresh = clip(0, &reach, &[0.4; 12]).tips(&frames, w, h).unwrap().to_vec();
-        assert!(c.tip_cache.get().is_none());
+        assert!(c.motion_cache.get().is_none());
         Motion::TIP.extract(&c).unwrap();
-        assert_eq!(c.tip_cache.get().unwrap().as_deref(), Some(&fresh[..]));
+        let kept = c.motion_cache.get().unwrap().as_ref().unwrap();
+        assert_eq!(kept.track.tips, fresh);
+        // The hand region, for motion-hand, comes from the same pass.
+        let hand = Motion::HAND.extract(&c).unwrap();
+        assert!(std::ptr::eq(
+            kept,
+            c.motion_cache.get().unwrap().as_ref().unwrap()
+        ));
+        assert_eq!(hand.n, 12);
         // Found once: other frames passed later do not change it.
         assert_eq!(c.tips(&frames[..2], w, h), Some(&fresh[..]));
         // The tip follows the bar's end upwards (y falls as it reaches in).

@@ -135,6 +135,7 @@ fn frame_motion(d: &[f32], w: usize, h: usize) -> FrameMotion {
 }
 
 /// What [`TipTracker::finish`] found in a clip.
+#[derive(Clone, Debug)]
 pub struct Track {
     /// The border the arm enters from.
     pub side: Side,

@@ -154,10 +154,15 @@ impl HandTrack {
         seeds: klt::Seeds::First,
     };
 
-    /// Why tracked `points` fail this yardstick against the frame-difference `tip`, if they do.
-    fn check(&self, points: &[Vec<(f64, f64)>], tip: &[(f64, f64)]) -> std::result::Result<(), String> {
-        let farthest = points.iter().map(|t| travel(&cleaned(t))).fold(0.0, f64::max);
-        let tip_travel = travel(&cleaned(tip));
+    /// Why tracked `points` fail this yardstick against the frame-difference `tip`, if they
+    /// do (both [`cleaned`]).
+    fn check(
+        &self,
+        points: &[(Vec<f64>, Vec<f64>)],
+        tip: &(Vec<f64>, Vec<f64>),
+    ) -> std::result::Result<(), String> {
+        let farthest = points.iter().map(travel).fold(0.0, f64::max);
+        let tip_travel = travel(tip);
         if farthest < self.min_travel * tip_travel {
             return Err(format!(
                 "the tracked points travel {farthest:.0} px, less than {}× the moving region's \
@@ -245,19 +250,16 @@ fn human_features(clip: &Clip, yardstick: Option<&HandTrack>) -> Result<Features
             ))
         })
     };
-    let tracks = match (points, yardstick) {
-        (Some(p), None) => p,
+    // The points, and the yardstick and tip that must vouch for them.
+    let (tracks, vouch) = match (points, yardstick) {
+        (Some(p), None) => (p, None),
         // Untextured, flat-shaded arms (milv-sim's) may give the point tracker nothing to
         // hold: then the tip found from frame differences stands in, in image coordinates.
-        (None, None) => vec![tip()?],
-        (None, Some(y)) if y.lenient => vec![tip()?],
+        (None, None) => (vec![tip()?], None),
+        (None, Some(y)) if y.lenient => (vec![tip()?], None),
         (Some(p), Some(y)) => match tip() {
-            Ok(t) => {
-                y.check(&p, &t)
-                    .map_err(|m| Error::Invalid(format!("episode {}: {m}", clip.episode_id)))?;
-                p
-            }
-            Err(_) if y.lenient => p,
+            Ok(t) => (p, Some((y, t))),
+            Err(_) if y.lenient => (p, None),
             Err(e) => return Err(e),
         },
         (None, Some(_)) => {
@@ -267,9 +269,13 @@ fn human_features(clip: &Clip, yardstick: Option<&HandTrack>) -> Result<Features
             )));
         }
     };
-    let cleaned: Vec<(Vec<f64>, Vec<f64>)> = tracks.iter().map(|t| cleaned(t)).collect();
+    let clean: Vec<(Vec<f64>, Vec<f64>)> = tracks.iter().map(|t| cleaned(t)).collect();
+    if let Some((y, tip)) = vouch {
+        y.check(&clean, &cleaned(&tip))
+            .map_err(|m| Error::Invalid(format!("episode {}: {m}", clip.episode_id)))?;
+    }
     let rows: Vec<Vec<f64>> = (0..n)
-        .map(|t| cleaned.iter().flat_map(|(x, y)| [x[t], y[t]]).collect())
+        .map(|t| clean.iter().flat_map(|(x, y)| [x[t], y[t]]).collect())
         .collect();
     features_of(&standardized(&rows))
 }
@@ -533,7 +539,7 @@ mod tests {
             height: 4,
             images: vec![],
             states: None,
-            tip_cache: Default::default(),
+            motion_cache: Default::default(),
             points_cache: Default::default(),
         };
         let e = Track.extract(&clip).unwrap_err().to_string();
@@ -564,7 +570,7 @@ mod tests {
             height: 16,
             images: still,
             states: None,
-            tip_cache: Default::default(),
+            motion_cache: Default::default(),
             points_cache: Default::default(),
         };
         let e = HandTrack::ON_HAND.extract(&clip).unwrap_err().to_string();
@@ -581,12 +587,9 @@ mod tests {
         // The tip sweeps 60 px; points that sweep `px` along with it.
         let sweep =
             |px: f64| -> Vec<(f64, f64)> { (0..30).map(|t| (10.0 + px * t as f64 / 29.0, 20.0)).collect() };
-        let tip = sweep(60.0);
-        let (object, wrist, hand) = (
-            vec![sweep(3.0), sweep(1.0)],
-            vec![sweep(30.0)],
-            vec![sweep(66.0), sweep(3.0)],
-        );
+        let tip = cleaned(&sweep(60.0));
+        let points = |px: &[f64]| -> Vec<_> { px.iter().map(|&p| cleaned(&sweep(p))).collect() };
+        let (object, wrist, hand) = (points(&[3.0, 1.0]), points(&[30.0]), points(&[66.0, 3.0]));
         // A pushed object's points (5 % of the tip's path) fail both.
         let e = HandTrack::MOVING.check(&object, &tip).unwrap_err();
         assert!(
