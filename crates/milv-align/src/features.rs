@@ -83,16 +83,22 @@ impl Clip {
     /// The tip found from frame differences in every frame ([`motion::TipTracker`]) of
     /// this clip, decoded as `frames`, unless already found; `None` when nothing moves.
     pub fn tips(&self, frames: &[Vec<u8>], w: usize, h: usize) -> Option<&[(f64, f64)]> {
-        self.motion_track(frames, w, h).map(|m| &m.track.tips[..])
+        self.motion_track(frames.iter().cloned(), w, h)
+            .map(|m| &m.track.tips[..])
     }
 
     /// The clip's [`motion::Track`] from `frames`, unless already found.
-    fn motion_track(&self, frames: &[Vec<u8>], w: usize, h: usize) -> Option<&MotionTrack> {
+    fn motion_track(
+        &self,
+        frames: impl ExactSizeIterator<Item = Vec<u8>>,
+        w: usize,
+        h: usize,
+    ) -> Option<&MotionTrack> {
         self.motion_cache
             .get_or_init(|| {
                 let mut tracker = motion::TipTracker::new(w, h, frames.len());
                 for f in frames {
-                    tracker.push(f.clone());
+                    tracker.push(f);
                 }
                 tracker.finish().map(|track| MotionTrack { track, w, h })
             })
@@ -104,8 +110,9 @@ impl Clip {
         if let Some(m) = self.motion_cache.get() {
             return Ok(m.as_ref());
         }
+        // Decoded for this pass alone: the tracker takes the frames over.
         let (frames, w, h) = self.all_rgb()?;
-        Ok(self.motion_track(&frames, w, h))
+        Ok(self.motion_track(frames.into_iter(), w, h))
     }
 
     /// [`klt::hand_tracks`] of this clip, decoding its frames only when not already kept.
