@@ -12,6 +12,7 @@ held-out ones too (`H`: MuJoCo 5+6, 7+8; drawing 5, 21; pushing 22).
     .venv/bin/python tools/bench/align_accuracy.py                   # auto, all twelve
     .venv/bin/python tools/bench/align_accuracy.py --kinds auto,motion,track --sets p13,mj12
     .venv/bin/python tools/bench/align_accuracy.py --per-pair --json out.json
+    .venv/bin/python tools/bench/align_accuracy.py --sets d7 -- --band 0.3   # after --: milv-align's
 
 Sets are generated once under --work (kept: later runs reuse them); each alignment runs
 on a fresh copy of its set's dataset, so every run sees the same pinned input. Prints a
@@ -51,17 +52,22 @@ SETS = {
 }
 
 
-def run(cmd: list[str], **kw) -> subprocess.CompletedProcess:
+def run(cmd: list[str], ok: tuple[int, ...] = (0,), **kw) -> subprocess.CompletedProcess:
     p = subprocess.run(cmd, capture_output=True, text=True, **kw)
-    if p.returncode:
+    if p.returncode not in ok:
         sys.exit(f"{' '.join(map(str, cmd))} failed ({p.returncode}):\n{p.stderr[-2000:]}")
     return p
+
+
+def built(d: Path) -> bool:
+    return (d / ".complete").is_file()
 
 
 def build(name: str, work: Path, bins: Path, python: str) -> Path:
     """Generates and ingests one set unless it is there already; returns its folder."""
     d = work / name
-    if (d / "ds").is_dir() and (d / "warps.jsonl").is_file():
+    # The marker is written last: a set whose generation or ingest failed is rebuilt.
+    if built(d):
         return d
     shutil.rmtree(d, ignore_errors=True)
     d.mkdir(parents=True)
@@ -78,23 +84,25 @@ def build(name: str, work: Path, bins: Path, python: str) -> Path:
     else:
         run([str(bins / "milv-sim"), "gen", "--task", gen, "--episodes", "20", "--seed", str(arg), "--out", str(d)])
         run([str(bins / "milv-ingest"), str(d / "ds"), "--manifest", str(d / "manifest.jsonl")])
+    (d / ".complete").write_text("")
     return d
 
 
 def align(d: Path, kind: str, bins: Path, extra: list[str]) -> tuple[dict, float]:
-    """Aligns a fresh copy of the set's dataset; returns the JSON report and seconds."""
-    with tempfile.TemporaryDirectory(dir=d) as tmp:
+    """Aligns a fresh copy of the set's dataset; returns the JSON report and seconds.
+    Exit status 3 (some pairs failed) still reports the others; the failures are counted."""
+    with tempfile.TemporaryDirectory(dir=d.parent, prefix=f".{d.name}-") as tmp:
         shutil.copytree(d / "ds", Path(tmp) / "ds")
         t = time.perf_counter()
         p = run([str(bins / "milv-align"), str(Path(tmp) / "ds"), "--features", kind,
-                 "--truth", str(d / "warps.jsonl"), "--json", *extra])
+                 "--truth", str(d / "warps.jsonl"), "--json", *extra], ok=(0, 3))
         return json.loads(p.stdout), time.perf_counter() - t
 
 
-def summary(report: dict, seconds: float) -> dict:
+def summary(report: dict, seconds: float, where: str) -> dict:
     ps = [p for p in report["pairs"] if p.get("mean_frame_error") is not None]
     if not ps:
-        raise SystemExit("no pair has ground truth: is warps.jsonl the set's?")
+        raise SystemExit(f"{where}: no pair has ground truth (is warps.jsonl the set's?)")
     frames = sum(p["human_frames"] + p["robot_frames"] for p in ps)
     mean = sum(p["mean_frame_error"] for p in ps) / len(ps)
     prop = sum(p["proportional_mean_error"] for p in ps) / len(ps)
@@ -103,7 +111,7 @@ def summary(report: dict, seconds: float) -> dict:
         "failed": len(report.get("failed", [])),
         "mean": mean,
         "proportional": prop,
-        "ratio": mean / prop if prop else None,
+        "ratio": mean / prop if prop else float("nan"),
         "max": max(p["max_frame_error"] for p in ps),
         "untrusted": sorted(p["pair_id"] for p in ps if not p["trusted"]),
         "trusted_worse": sorted(report["trusted_worse_than_proportional"]),
@@ -124,38 +132,49 @@ def main() -> None:
     ap.add_argument("--python", default=str(ROOT / ".venv/bin/python"), help="Python with mujoco (tools/setup.sh)")
     ap.add_argument("--per-pair", action="store_true", help="also print every pair's error beside the baseline")
     ap.add_argument("--json", type=Path, help="write every summary (and with --per-pair the reports) here")
-    ap.add_argument("align_args", nargs=argparse.REMAINDER, help="after --: passed to milv-align")
-    args = ap.parse_args()
+    argv = sys.argv[1:]
+    # Everything after the first `--` goes to milv-align untouched.
+    extra = argv[argv.index("--") + 1:] if "--" in argv else []
+    args = ap.parse_args(argv[:argv.index("--")] if "--" in argv else argv)
     sets = [s for s in args.sets.split(",") if s]
+    kinds = [k for k in args.kinds.split(",") if k]
+    if not sets or not kinds:
+        ap.error("--sets and --kinds need at least one name each")
     unknown = [s for s in sets if s not in SETS]
     if unknown:
         ap.error(f"unknown sets {unknown}; known: {', '.join(SETS)}")
-    for b in ("milv-align", "milv-sim", "milv-ingest"):
+    to_build = [s for s in sets if not built(args.work / s)]
+    needed = ["milv-align"] + (["milv-sim", "milv-ingest"] if to_build else [])
+    for b in needed:
         if not (args.bin / b).is_file():
             ap.error(f"{args.bin / b} is missing: build it first (cargo build --bins)")
-    extra = [a for a in args.align_args if a != "--"]
+    if any(SETS[s][0] == "mujoco" for s in to_build):
+        if not Path(args.python).is_file():
+            ap.error(f"{args.python} is missing: MuJoCo sets need it (tools/setup.sh makes .venv)")
+        print(f"MuJoCo renders with MUJOCO_GL={os.environ.get('MUJOCO_GL', 'egl')}", file=sys.stderr)
     folders = {}
     for s in sets:
         t = time.perf_counter()
         folders[s] = build(s, args.work, args.bin, args.python)
         print(f"set {s}: {folders[s]} ({time.perf_counter() - t:.1f} s)", file=sys.stderr)
     out = {}
-    for kind in args.kinds.split(","):
+    for kind in kinds:
         print(f"\n#### `--features {kind}`{' ' + ' '.join(extra) if extra else ''}\n")
-        print("| set | | mean | proportional | × | max | untrusted | trusted, worse than proportional | s | frames/s |")
-        print("|---|---|---:|---:|---:|---:|---:|---|---:|---:|")
+        print("| set | | pairs | mean | proportional | × | max | untrusted | trusted, worse than proportional | s | frames/s |")
+        print("|---|---|---:|---:|---:|---:|---:|---:|---|---:|---:|")
         rows = {}
         for s in sets:
             report, secs = align(folders[s], kind, args.bin, extra)
-            r = rows[s] = summary(report, secs)
+            r = rows[s] = summary(report, secs, f"{s} ({kind})")
             worse = " ".join(p.rsplit("-", 1)[-1] for p in r["trusted_worse"])
-            print(f"| {s} | {'D' if SETS[s][2] else 'H'} | {r['mean']:.2f} | {r['proportional']:.2f} | "
-                  f"{r['ratio']:.2f} | {r['max']} | {len(r['untrusted'])} | {len(r['trusted_worse'])} {worse} | "
-                  f"{secs:.1f} | {r['frames_per_s']:.0f} |", flush=True)
+            failed = f" ({r['failed']} failed)" if r["failed"] else ""
+            print(f"| {s} | {'D' if SETS[s][2] else 'H'} | {r['pairs']}{failed} | {r['mean']:.2f} | "
+                  f"{r['proportional']:.2f} | {r['ratio']:.2f} | {r['max']} | {len(r['untrusted'])} | "
+                  f"{len(r['trusted_worse'])} {worse} | {secs:.1f} | {r['frames_per_s']:.0f} |", flush=True)
             if args.per_pair:
                 for p in report["pairs"]:
                     flag = "T" if p["trusted"] else "U"
-                    print(f"|   {p['pair_id']} | {p['features']} | {p['mean_frame_error']:.2f} | "
+                    print(f"|   {p['pair_id']} | {p['features']} | | {p['mean_frame_error']:.2f} | "
                           f"{p['proportional_mean_error']:.2f} | | {p['max_frame_error']} | {flag} | "
                           f"cost/dim {p['cost_per_dim']:.5f}, band {p['band']:.1f} | | |")
                 r["report"] = report

@@ -81,7 +81,8 @@ impl Clip {
     }
 
     /// The tip found from frame differences in every frame ([`motion::TipTracker`]) of
-    /// this clip, decoded as `frames`, unless already found; `None` when nothing moves.
+    /// this clip, decoded as `frames`, unless already found; `None` when nothing moves
+    /// beyond the entry border.
     pub fn tips(&self, frames: &[Vec<u8>], w: usize, h: usize) -> Option<&[(f64, f64)]> {
         self.motion_track(frames.iter().cloned(), w, h)
             .map(|m| &m.track.tips[..])
@@ -298,7 +299,8 @@ impl FeatureKind for Motion {
     fn extract(&self, clip: &Clip) -> Result<Features, Error> {
         let MotionTrack { track, w, h } = clip.motion_decoded()?.ok_or_else(|| {
             Error::Invalid(format!(
-                "episode {}: nothing moves in the clip (motion features need a moving arm)",
+                "episode {}: nothing moves in the clip beyond the border the arm enters from \
+                 (motion features need a moving arm)",
                 clip.episode_id
             ))
         })?;

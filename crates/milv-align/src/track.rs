@@ -245,7 +245,8 @@ fn human_features(clip: &Clip, yardstick: Option<&HandTrack>) -> Result<Features
     let tip = || {
         clip.tips_decoded()?.map(<[_]>::to_vec).ok_or_else(|| {
             Error::Invalid(format!(
-                "episode {}: nothing moves in the clip (track features need a moving arm)",
+                "episode {}: nothing moves in the clip beyond the border the arm enters from \
+                 (track features need a moving arm)",
                 clip.episode_id
             ))
         })
