@@ -31,6 +31,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -117,8 +118,7 @@ def summary(report: dict, seconds: float, where: str) -> dict:
         "trusted_worse": sorted(report["trusted_worse_than_proportional"]),
         "seconds": seconds,
         "frames_per_s": frames / seconds,
-        "features_per_pair": dict(sorted(
-            {k: sum(p["features"] == k for p in ps) for k in {p["features"] for p in ps}}.items())),
+        "features_per_pair": dict(sorted(Counter(p["features"] for p in ps).items())),
     }
 
 

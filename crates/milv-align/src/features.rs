@@ -133,6 +133,16 @@ impl Clip {
         })
     }
 
+    /// Why `kind`'s features cannot describe this clip when its frame-difference pass
+    /// found no tip ([`Clip::motion_decoded`] is `None`).
+    pub(crate) fn no_motion(&self, kind: &str) -> Error {
+        Error::Invalid(format!(
+            "episode {}: nothing moves in the clip beyond the border the arm enters from \
+             ({kind} features need a moving arm)",
+            self.episode_id
+        ))
+    }
+
     /// [`Clip::tips`], decoding the frames only when the tips are not already found.
     pub(crate) fn tips_decoded(&self) -> Result<Option<&[(f64, f64)]>, Error> {
         Ok(self.motion_decoded()?.map(|m| &m.track.tips[..]))
@@ -297,13 +307,7 @@ impl FeatureKind for Motion {
     }
 
     fn extract(&self, clip: &Clip) -> Result<Features, Error> {
-        let MotionTrack { track, w, h } = clip.motion_decoded()?.ok_or_else(|| {
-            Error::Invalid(format!(
-                "episode {}: nothing moves in the clip beyond the border the arm enters from \
-                 (motion features need a moving arm)",
-                clip.episode_id
-            ))
-        })?;
+        let MotionTrack { track, w, h } = clip.motion_decoded()?.ok_or_else(|| clip.no_motion("motion"))?;
         let (n, w, h) = (track.tips.len(), *w, *h);
         let plane = motion::table_quad(&track.background, w, h)
             .and_then(|q| motion::to_unit_square(&q))

@@ -243,13 +243,9 @@ fn human_features(clip: &Clip, yardstick: Option<&HandTrack>) -> Result<Features
     let n = clip.images.len();
     let points = clip.hand_tracks(yardstick.map_or(klt::Seeds::First, |y| y.seeds))?;
     let tip = || {
-        clip.tips_decoded()?.map(<[_]>::to_vec).ok_or_else(|| {
-            Error::Invalid(format!(
-                "episode {}: nothing moves in the clip beyond the border the arm enters from \
-                 (track features need a moving arm)",
-                clip.episode_id
-            ))
-        })
+        clip.tips_decoded()?
+            .map(<[_]>::to_vec)
+            .ok_or_else(|| clip.no_motion("track"))
     };
     // The points, and the yardstick and tip that must vouch for them.
     let (tracks, vouch) = match (points, yardstick) {
