@@ -79,9 +79,41 @@ fn simulated_pairs_align_within_the_goals() {
                 // Paths run from (0, 0) to the last frames, one row per aligned cell.
                 assert!(p["path_length"].as_u64().unwrap() >= p["human_frames"].as_u64().unwrap());
                 assert!(p["trusted"].as_bool().unwrap(), "{task} {features}: {p}");
+                // Off by default: no pair takes the proportional warp.
+                assert_eq!(p["proportional"], false, "{task} {features}: {p}");
             }
             rows += rep["rows"].as_u64().unwrap();
         }
+        // Where the posterior cannot tell the decoded warp from the proportional one, that
+        // is taken, and its error is the proportional warp's (a run of its own).
+        let args = [
+            ds_s,
+            "--pairs",
+            &pairs,
+            "--truth",
+            path_str(&truth),
+            "--features",
+            "motion",
+            "--proportional-within",
+            "1.3",
+        ];
+        let (code, rep, err) = align_json(&args);
+        assert_eq!(code, 0, "{err}");
+        assert_eq!(rep["already_aligned"], 0, "{task}");
+        let pairs = rep["pairs"].as_array().unwrap();
+        for p in pairs {
+            assert!(p["posterior_sd"].as_f64().unwrap() > 0.0, "{task}: {p}");
+            if p["proportional"].as_bool().unwrap() {
+                assert_eq!(p["mean_frame_error"], p["proportional_mean_error"], "{task}: {p}");
+            }
+        }
+        let taken = pairs.iter().filter(|p| p["proportional"] == true).count();
+        assert!(
+            taken > 0 && taken < pairs.len(),
+            "{task}: {taken} of {} took it",
+            pairs.len()
+        );
+        rows += rep["rows"].as_u64().unwrap();
     }
     let info = ds_json(&["info", ds_s]);
     assert_eq!(info["tables"]["alignments"]["rows"].as_u64().unwrap(), rows);
@@ -116,6 +148,9 @@ fn simulated_pairs_align_within_the_goals() {
     let (code, _, err) = align_json(&[ds_s, "--temperature=-1"]);
     assert_ne!(code, 0);
     assert!(err.contains("--temperature -1"), "{err}");
+    let (code, _, err) = align_json(&[ds_s, "--proportional-within=-1"]);
+    assert_ne!(code, 0);
+    assert!(err.contains("--proportional-within -1"), "{err}");
 }
 
 #[test]

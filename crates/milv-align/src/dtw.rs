@@ -390,37 +390,64 @@ fn log_add(a: f64, b: f64) -> f64 {
     }
 }
 
-/// Index of the weighted median of log-weights `logw` (the first index where the running
-/// sum reaches half the total).
-fn weighted_median(logw: impl Iterator<Item = f64> + Clone) -> usize {
+/// Weighted median index and standard deviation (in indices) of log-weights `logw`: the
+/// median is the first index where the running sum reaches half the total.
+fn weighted_median_sd(logw: impl Iterator<Item = f64> + Clone) -> (usize, f64) {
     let top = logw.clone().fold(f64::NEG_INFINITY, f64::max);
-    let total: f64 = logw.clone().map(|l| (l - top).exp()).sum();
+    let w: Vec<f64> = logw.map(|l| (l - top).exp()).collect();
+    let total: f64 = w.iter().sum();
+    let mean = w.iter().enumerate().map(|(k, v)| k as f64 * v).sum::<f64>() / total;
+    let var = w
+        .iter()
+        .enumerate()
+        .map(|(k, v)| (k as f64 - mean).powi(2) * v)
+        .sum::<f64>()
+        / total;
     let mut cum = 0.0;
-    for (k, l) in logw.enumerate() {
-        cum += (l - top).exp();
-        if cum >= 0.5 * total {
-            return k;
-        }
-    }
-    0
+    let median = w
+        .iter()
+        .position(|v| {
+            cum += v;
+            cum >= 0.5 * total
+        })
+        .unwrap_or(0);
+    (median, var.sqrt())
 }
 
-/// Posterior decoding of the warping path: for each row, its median column. Every path
-/// inside `band` is weighted by `exp(−cost / temperature)`, its cost accumulated as
-/// `step` does; forward and backward sums give each cell's probability of lying on the
-/// path, and each row takes the median column of its cells (made non-decreasing).
+/// What posterior decoding says of each row (human frame).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Posterior {
+    /// The row's median column over all paths, made non-decreasing.
+    pub medians: Vec<usize>,
+    /// The standard deviation of the row's column over all paths (in columns): how
+    /// sure the features are of the row's partner.
+    pub sd: Vec<f64>,
+}
+
+impl Posterior {
+    /// Mean of [`Posterior::sd`] over the rows.
+    pub fn mean_sd(&self) -> f64 {
+        self.sd.iter().sum::<f64>() / self.sd.len().max(1) as f64
+    }
+}
+
+/// Posterior decoding of the warping path: for each row, its median column and that
+/// column's spread. Every path inside `band` is weighted by `exp(−cost / temperature)`,
+/// its cost accumulated as `step` does; forward and backward sums give each cell's
+/// probability of lying on the path, and each row takes the median column of its cells
+/// (made non-decreasing).
 ///
 /// Why not the single best path: where the features are flat or ambiguous, many paths
 /// cost nearly the same and the best one takes an arbitrary corner among them; the
 /// median over them minimises the expected |frame error| instead (posterior decoding, as
 /// for hidden Markov models).
-pub fn posterior_medians(
+pub fn posterior(
     a: &Features,
     b: &Features,
     band: &Band,
     step: StepPattern,
     temperature: f64,
-) -> Result<Vec<usize>, Error> {
+) -> Result<Posterior, Error> {
     check_inputs(a, b, band)?;
     let (n, m) = (a.n, b.n);
     if !(temperature > 0.0 && temperature.is_finite()) {
@@ -487,15 +514,17 @@ pub fn posterior_medians(
         )));
     }
     let mut hi = 0;
-    Ok((0..n)
+    let (medians, sd) = (0..n)
         .map(|i| {
             let row = fwd[offsets[i]..offsets[i + 1]]
                 .iter()
                 .zip(&bwd[offsets[i]..offsets[i + 1]]);
-            hi = hi.max(band.lo[i] + weighted_median(row.map(|(f, b)| f + b)));
-            hi
+            let (median, sd) = weighted_median_sd(row.map(|(f, b)| f + b));
+            hi = hi.max(band.lo[i] + median);
+            (hi, sd)
         })
-        .collect())
+        .unzip();
+    Ok(Posterior { medians, sd })
 }
 
 #[cfg(test)]
@@ -605,9 +634,16 @@ mod tests {
         let best = dtw(&a, &b, &band, StepPattern::Symmetric2, true).unwrap();
         assert_eq!(row_to_col(&best.path, a.n), [0, 1, 2, 2, 2, 2, 3, 4, 5, 6]);
         for t in [0.01, 0.1, 1.0] {
-            let med = posterior_medians(&a, &b, &band, StepPattern::Symmetric2, t).unwrap();
-            assert_eq!(med, [0, 1, 2, 2, 3, 3, 4, 4, 5, 6], "temperature {t}");
+            let post = posterior(&a, &b, &band, StepPattern::Symmetric2, t).unwrap();
+            assert_eq!(post.medians, [0, 1, 2, 2, 3, 3, 4, 4, 5, 6], "temperature {t}");
+            // The plateau's rows are unsure of their partner, the rows after it are not.
         }
+        // The plateau's rows are unsure of their partner, the rows around it are not.
+        let sd = posterior(&a, &b, &band, StepPattern::Symmetric2, 0.01)
+            .unwrap()
+            .sd;
+        assert!(sd[3..=6].iter().all(|&v| v > 0.5), "{sd:?}");
+        assert!(sd[..2].iter().chain(&sd[8..]).all(|&v| v < 0.01), "{sd:?}");
     }
 
     #[test]
@@ -619,8 +655,11 @@ mod tests {
             StepPattern::Symmetric2,
             StepPattern::Asymmetric,
         ] {
-            let med = posterior_medians(&a, &a, &Band::around_diagonal(30, 30, 6), step, 0.05).unwrap();
-            assert_eq!(med, (0..30).collect::<Vec<_>>(), "{step:?}");
+            let post = posterior(&a, &a, &Band::around_diagonal(30, 30, 6), step, 0.05).unwrap();
+            assert_eq!(post.medians, (0..30).collect::<Vec<_>>(), "{step:?}");
+            // A colder posterior is surer of each partner.
+            let sharp = posterior(&a, &a, &Band::around_diagonal(30, 30, 6), step, 0.005).unwrap();
+            assert!(sharp.mean_sd() < 0.5 * post.mean_sd(), "{step:?}");
         }
     }
 
@@ -635,13 +674,13 @@ mod tests {
     }
 
     #[test]
-    fn posterior_medians_refuse_a_bad_temperature_or_band() {
+    fn posterior_refuses_a_bad_temperature_or_band() {
         let a = seq(&[0.0, 1.0, 2.0]);
         for t in [0.0, -1.0, f64::NAN, f64::INFINITY] {
-            assert!(posterior_medians(&a, &a, &Band::full(3, 3), StepPattern::Symmetric2, t).is_err());
+            assert!(posterior(&a, &a, &Band::full(3, 3), StepPattern::Symmetric2, t).is_err());
         }
         let long = seq(&[0.0; 9]);
-        let err = posterior_medians(&a, &long, &Band::absolute(3, 9, 0), StepPattern::Asymmetric, 1.0);
+        let err = posterior(&a, &long, &Band::absolute(3, 9, 0), StepPattern::Asymmetric, 1.0);
         assert!(err.unwrap_err().to_string().contains("no warping path"));
     }
 }

@@ -6,7 +6,7 @@
 //!
 //! | module | what |
 //! |---|---|
-//! | [`mod@dtw`] | banded DTW (Sakoe–Chiba, O(n·band) memory), step patterns, [`Features`]; posterior decoding of the path ([`posterior_medians`]) |
+//! | [`mod@dtw`] | banded DTW (Sakoe–Chiba, O(n·band) memory), step patterns, [`Features`]; posterior decoding of the path ([`posterior`]) |
 //! | [`features`] | the [`FeatureKind`] trait and its kinds: `motion`, `track`, `state`, `translated` |
 //! | [`motion`] | tip tracking from frame differences, table-plane rectification, track filters |
 //! | [`klt`] | feature-point tracking (Shi–Tomasi + pyramidal Lucas–Kanade) of the most travelled points |
@@ -23,7 +23,7 @@ pub mod track;
 pub use align::{
     AlignOptions, AlignReport, Correspondence, POSTERIOR_TEMPERATURE, PairSummary, align_dataset, load_pair,
 };
-pub use dtw::{Alignment, Band, Features, StepPattern, dtw, posterior_medians, row_to_col, staircase};
+pub use dtw::{Alignment, Band, Features, Posterior, StepPattern, dtw, posterior, row_to_col, staircase};
 pub use features::{Clip, FeatureKind};
 
 /// Why a pair or a run could not be aligned.
