@@ -116,6 +116,8 @@ def summary(report: dict, seconds: float, where: str) -> dict:
         "max": max(p["max_frame_error"] for p in ps),
         "untrusted": sorted(p["pair_id"] for p in ps if not p["trusted"]),
         "trusted_worse": sorted(report["trusted_worse_than_proportional"]),
+        # Pairs that took the proportional warp (milv-align --proportional-within).
+        "proportional_taken": sorted(p["pair_id"] for p in ps if p.get("proportional")),
         "seconds": seconds,
         "frames_per_s": frames / seconds,
         "features_per_pair": dict(sorted(Counter(p["features"] for p in ps).items())),
@@ -174,7 +176,8 @@ def main() -> None:
             if args.per_pair:
                 for p in report["pairs"]:
                     flag = "T" if p["trusted"] else "U"
-                    print(f"|   {p['pair_id']} | {p['features']} | | {p['mean_frame_error']:.2f} | "
+                    kind_used = p["features"] + (">prop" if p.get("proportional") else "")
+                    print(f"|   {p['pair_id']} | {kind_used} | | {p['mean_frame_error']:.2f} | "
                           f"{p['proportional_mean_error']:.2f} | | {p['max_frame_error']} | {flag} | "
                           f"cost/dim {p['cost_per_dim']:.5f}, band {p['band']:.1f} | | |")
                 r["report"] = report
@@ -184,6 +187,9 @@ def main() -> None:
         print(f"\n{kind}: {pairs} pairs, {untr} untrusted, {worse} trusted but worse than proportional; "
               f"worst ratio {max(r['ratio'] for r in rows.values()):.2f}, "
               f"worst mean {max(r['mean'] for r in rows.values()):.2f}")
+        taken = sum(len(r["proportional_taken"]) for r in rows.values())
+        if taken:
+            print(f"{taken} of them took the proportional warp (--proportional-within)")
         out[kind] = rows
     if args.json:
         args.json.write_text(json.dumps(out, indent=1))
