@@ -103,15 +103,16 @@ struct Common {
     /// path.
     #[arg(long, default_value_t = milv::align::POSTERIOR_TEMPERATURE)]
     temperature: f64,
-    /// A pair whose decoded partners lie within this many posterior standard deviations
-    /// of the proportional warp (round(i·(m−1)/(n−1)); both averaged over the human
-    /// frames) takes the proportional warp: where its features cannot tell the two apart,
-    /// never be worse than stretching one clip onto the other. Costs mean accuracy: at
-    /// 1.3, on the evaluation sets of BENCHMARKS.md, trusted pairs worse than the
-    /// proportional warp fall 9 → 1, but 37 of the 47 pairs it switches get worse. The
-    /// report marks such pairs (proportional: true); every pair's posterior spread is
-    /// reported as posterior_sd. 0 (default): never; no effect with --temperature 0.
-    #[arg(long, default_value_t = 0.0)]
+    /// Take the proportional warp, round(i·(m−1)/(n−1)) for human frame i of n and m
+    /// robot frames, for a pair whose partners (the posterior medians, see --temperature)
+    /// lie on average within K posterior standard deviations of it: where the features
+    /// cannot tell the two apart, a pair that switches scores exactly as stretching one
+    /// clip onto the other does. Costs mean accuracy: at 1.3, on the evaluation sets of
+    /// BENCHMARKS.md, trusted pairs worse than the proportional warp fall 9 → 1, but 37 of
+    /// the 47 pairs it switches get worse. The report marks such pairs (proportional:
+    /// true); every pair's mean posterior spread is reported as posterior_sd. 0 (default):
+    /// never; no effect with --temperature 0.
+    #[arg(long, value_name = "K", default_value_t = 0.0)]
     proportional_within: f64,
 }
 
@@ -228,7 +229,7 @@ fn run_align(a: RunArgs) -> anyhow::Result<u8> {
         );
         let num = |e: Option<f64>| e.map_or("-".into(), |e| format!("{e:.2}"));
         println!(
-            "{:<28} {:>6} {:>6} {:>8} {:>10} {:>6} {:>5} {:>7} {:>9} {:>9}",
+            "{:<28} {:>6} {:>6} {:>16} {:>10} {:>6} {:>5} {:>7} {:>9} {:>9}",
             "pair",
             "human",
             "robot",
@@ -242,7 +243,7 @@ fn run_align(a: RunArgs) -> anyhow::Result<u8> {
         );
         for p in &rep.pairs {
             println!(
-                "{:<28} {:>6} {:>6} {:>8} {:>10.4} {:>6} {:>5.2} {:>7} {:>9} {:>9}",
+                "{:<28} {:>6} {:>6} {:>16} {:>10.4} {:>6} {:>5.2} {:>7} {:>9} {:>9}",
                 p.pair_id,
                 p.human_frames,
                 p.robot_frames,

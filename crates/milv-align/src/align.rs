@@ -37,7 +37,7 @@ pub struct AlignOptions {
     /// A pair whose decoded warp lies within this many posterior standard deviations of
     /// the proportional warp (both averaged over the human frames) takes the proportional
     /// warp: its features cannot tell the two apart. 0 (the default): never. It trades
-    /// mean accuracy for never being worse than the proportional warp where unsure: at
+    /// mean accuracy for matching the proportional warp where unsure: at
     /// 1.3 (chosen on the design seeds) trusted pairs worse than proportional on the
     /// twelve evaluation sets fall 9 → 1, but of the 47 pairs it switches 37 get worse
     /// and 9 better (BENCHMARKS.md, "The proportional warp where the features cannot tell").
@@ -137,7 +137,8 @@ pub struct PairSummary {
     pub proportional_mean_error: Option<f64>,
     pub proportional_max_error: Option<usize>,
     /// Mean over the human frames of the posterior standard deviation of each frame's
-    /// partner (robot frames); none when the best path was decoded (`--temperature 0`).
+    /// partner (robot frames; [`crate::Posterior::sd`]); none where the best path was
+    /// decoded (`--temperature 0`, or a best path that costs nothing).
     pub posterior_sd: Option<f64>,
     /// Whether the pair took the proportional warp ([`AlignOptions::proportional_within`]).
     pub proportional: bool,
@@ -319,8 +320,9 @@ impl PairFit<'_> {
         let post = posterior(h, r, &band_for(h.n, r.n, self.band), opts.step, t)?;
         let sd = post.mean_sd();
         let prop = proportional_warp(h.n, r.n);
-        let gap = frame_errors(&post.medians, &prop).0.unwrap_or(0.0);
-        let proportional = gap < opts.proportional_within * sd;
+        let proportional = frame_errors(&post.medians, &prop)
+            .0
+            .is_some_and(|gap| gap < opts.proportional_within * sd);
         let rows = if proportional { prop } else { post.medians };
         let cells = staircase(&rows, r.n)
             .into_iter()
@@ -919,8 +921,8 @@ mod tests {
         human: |u| u.powi(3),
     };
 
-    /// The true warp the identity, the human's progress ahead of the robot's by a bump of
-    /// 1.5 % of the clip mid-way (a feature's embodiment bias).
+    /// The true warp is the identity; the human's progress runs ahead of the robot's by a
+    /// bump of 1.5 % of the clip mid-way (a feature's embodiment bias).
     const BIASED: Progress = Progress {
         name: "biased",
         human: |u| u + 0.015 * (std::f64::consts::PI * u).sin(),

@@ -392,9 +392,11 @@ fn log_add(a: f64, b: f64) -> f64 {
 
 /// Weighted median index and standard deviation (in indices) of log-weights `logw`: the
 /// median is the first index where the running sum reaches half the total.
-fn weighted_median_sd(logw: impl Iterator<Item = f64> + Clone) -> (usize, f64) {
-    let top = logw.clone().fold(f64::NEG_INFINITY, f64::max);
-    let w: Vec<f64> = logw.map(|l| (l - top).exp()).collect();
+fn weighted_median_sd(logw: &[f64]) -> (usize, f64) {
+    let top = logw.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    // Every row of a band that holds a path has a reachable cell.
+    debug_assert!(top.is_finite(), "a row without a reachable cell");
+    let w: Vec<f64> = logw.iter().map(|l| (l - top).exp()).collect();
     let total: f64 = w.iter().sum();
     let mean = w.iter().enumerate().map(|(k, v)| k as f64 * v).sum::<f64>() / total;
     let var = w
@@ -419,8 +421,10 @@ fn weighted_median_sd(logw: impl Iterator<Item = f64> + Clone) -> (usize, f64) {
 pub struct Posterior {
     /// The row's median column over all paths, made non-decreasing.
     pub medians: Vec<usize>,
-    /// The standard deviation of the row's column over all paths (in columns): how
-    /// sure the features are of the row's partner.
+    /// The standard deviation of the columns of the row's cells over all paths (in
+    /// columns): how unsure the features are of the row's partner, plus the width of a
+    /// path's own run along the row (with symmetric steps, about m/n cells where the
+    /// robot clip is the longer; at most one cell per row with asymmetric steps).
     pub sd: Vec<f64>,
 }
 
@@ -516,10 +520,12 @@ pub fn posterior(
     let mut hi = 0;
     let (medians, sd) = (0..n)
         .map(|i| {
-            let row = fwd[offsets[i]..offsets[i + 1]]
+            let row: Vec<f64> = fwd[offsets[i]..offsets[i + 1]]
                 .iter()
-                .zip(&bwd[offsets[i]..offsets[i + 1]]);
-            let (median, sd) = weighted_median_sd(row.map(|(f, b)| f + b));
+                .zip(&bwd[offsets[i]..offsets[i + 1]])
+                .map(|(f, b)| f + b)
+                .collect();
+            let (median, sd) = weighted_median_sd(&row);
             hi = hi.max(band.lo[i] + median);
             (hi, sd)
         })
@@ -627,7 +633,7 @@ mod tests {
     /// median spreads the rows evenly over the columns, as the true (proportional) match
     /// within the plateau would.
     #[test]
-    fn posterior_medians_spread_a_flat_stretch_where_the_best_path_takes_a_corner() {
+    fn posterior_spreads_a_flat_stretch_where_the_best_path_takes_a_corner() {
         let a = seq(&[0.0, 0.5, 1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 1.5, 2.0]);
         let b = seq(&[0.0, 0.5, 1.0, 1.0, 1.0, 1.5, 2.0]);
         let band = Band::full(a.n, b.n);
@@ -636,7 +642,6 @@ mod tests {
         for t in [0.01, 0.1, 1.0] {
             let post = posterior(&a, &b, &band, StepPattern::Symmetric2, t).unwrap();
             assert_eq!(post.medians, [0, 1, 2, 2, 3, 3, 4, 4, 5, 6], "temperature {t}");
-            // The plateau's rows are unsure of their partner, the rows after it are not.
         }
         // The plateau's rows are unsure of their partner, the rows around it are not.
         let sd = posterior(&a, &b, &band, StepPattern::Symmetric2, 0.01)
@@ -647,7 +652,7 @@ mod tests {
     }
 
     #[test]
-    fn posterior_medians_of_a_sequence_against_itself_are_the_identity() {
+    fn posterior_of_a_sequence_against_itself_is_the_identity() {
         let v: Vec<f64> = (0..30).map(|k| (k as f64 * 0.3).sin() + k as f64 * 0.1).collect();
         let a = seq(&v);
         for step in [
