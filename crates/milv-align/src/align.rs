@@ -37,10 +37,8 @@ pub struct AlignOptions {
     /// A pair whose decoded warp lies within this many posterior standard deviations of
     /// the proportional warp (both averaged over the human frames) takes the proportional
     /// warp: its features cannot tell the two apart. 0 (the default): never. It trades
-    /// mean accuracy for matching the proportional warp where unsure: at
-    /// 1.3 (chosen on the design seeds) trusted pairs worse than proportional on the
-    /// twelve evaluation sets fall 9 → 1, but of the 47 pairs it switches 37 get worse
-    /// and 9 better (BENCHMARKS.md, "The proportional warp where the features cannot tell").
+    /// mean accuracy for matching the proportional warp where unsure (measured in
+    /// BENCHMARKS.md, "The proportional warp where the features cannot tell").
     pub proportional_within: f64,
 }
 

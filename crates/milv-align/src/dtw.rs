@@ -390,13 +390,14 @@ fn log_add(a: f64, b: f64) -> f64 {
     }
 }
 
-/// Weighted median index and standard deviation (in indices) of log-weights `logw`: the
-/// median is the first index where the running sum reaches half the total.
-fn weighted_median_sd(logw: &[f64]) -> (usize, f64) {
-    let top = logw.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+/// Weighted median index and standard deviation (in indices) of log-weights `w` (turned
+/// into weights in place): the median is the first index where the running sum reaches
+/// half the total.
+fn weighted_median_sd(w: &mut [f64]) -> (usize, f64) {
+    let top = w.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     // Every row of a band that holds a path has a reachable cell.
     debug_assert!(top.is_finite(), "a row without a reachable cell");
-    let w: Vec<f64> = logw.iter().map(|l| (l - top).exp()).collect();
+    w.iter_mut().for_each(|l| *l = (*l - top).exp());
     let total: f64 = w.iter().sum();
     let mean = w.iter().enumerate().map(|(k, v)| k as f64 * v).sum::<f64>() / total;
     let var = w
@@ -520,12 +521,12 @@ pub fn posterior(
     let mut hi = 0;
     let (medians, sd) = (0..n)
         .map(|i| {
-            let row: Vec<f64> = fwd[offsets[i]..offsets[i + 1]]
+            let mut row: Vec<f64> = fwd[offsets[i]..offsets[i + 1]]
                 .iter()
                 .zip(&bwd[offsets[i]..offsets[i + 1]])
                 .map(|(f, b)| f + b)
                 .collect();
-            let (median, sd) = weighted_median_sd(&row);
+            let (median, sd) = weighted_median_sd(&mut row);
             hi = hi.max(band.lo[i] + median);
             (hi, sd)
         })
