@@ -108,8 +108,8 @@ struct Common {
     /// lie on average within K posterior standard deviations of it: where the features
     /// cannot tell the two apart, a pair that switches scores exactly as stretching one
     /// clip onto the other does. Costs mean accuracy: at 1.3, on the evaluation sets of
-    /// BENCHMARKS.md, trusted pairs worse than the proportional warp fall 9 → 1, but 37 of
-    /// the 47 pairs it switches get worse. The report marks such pairs (proportional:
+    /// BENCHMARKS.md, trusted pairs worse than the proportional warp fall 5 → 2, but 39 of
+    /// the 44 pairs it switches get worse. The report marks such pairs (proportional:
     /// true); every pair's mean posterior spread is reported as posterior_sd. 0 (default):
     /// never; no effect with --temperature 0.
     #[arg(long, value_name = "K", default_value_t = 0.0)]
