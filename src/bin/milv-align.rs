@@ -60,14 +60,16 @@ struct Common {
     /// fits (milv-sim-like scenes), else track (robot clips with states), unless only
     /// motion's cost is within its trust bound or the human clip's tracked points travel
     /// less than a tenth as far as motion's tip (a pushed object, not the hand: motion's
-    /// alignment is kept, flagged if untrusted); where motion fits, track instead when its
+    /// cost decides, flagged if untrusted, and motion-hand aligns where trusted); where
+    /// motion fits, track instead when its
     /// path stays off the band's edge and its points travel as far as motion's tip (on the
     /// hand; points seeded through the clip or in its first frame, whichever fit costs
     /// less), else motion-hand (motion's features from the hand region, deeper than the
     /// tip, nearer the end effector); the report names the kind used per pair;
     /// motion: progress and heading of the arm's tip, tracked from frame differences and
     /// mapped onto the table plane (any clip); motion-hand: the same from the hand region,
-    /// deeper in the moving pixels than the tip (nearer the end effector); track: the human's hand followed by image
+    /// deeper in the moving pixels than the tip, measured from where the arm enters the
+    /// picture (nearer the end effector); track: the human's hand followed by image
     /// feature points, against the robot's end-effector states mapped into the human's
     /// view by an affine camera fitted per pair (robot clips need states; no scene
     /// assumption); state: the episodes' state vectors (e.g.
@@ -108,7 +110,7 @@ struct Common {
     /// lie on average within K posterior standard deviations of it: where the features
     /// cannot tell the two apart, a pair that switches scores exactly as stretching one
     /// clip onto the other does. Costs mean accuracy: at 1.3, on the evaluation sets of
-    /// BENCHMARKS.md, trusted pairs worse than the proportional warp fall 5 → 2, but 39 of
+    /// BENCHMARKS.md, trusted pairs worse than the proportional warp fall 4 → 2, but 40 of
     /// the 44 pairs it switches get worse. The report marks such pairs (proportional:
     /// true); every pair's mean posterior spread is reported as posterior_sd. 0 (default):
     /// never; no effect with --temperature 0.

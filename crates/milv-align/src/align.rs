@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::dtw::{Alignment, Band, StepPattern, dtw, posterior, row_to_col, staircase};
-use crate::features::{Clip, ClipSource, FeatureKind};
+use crate::features::{Clip, ClipSource, FeatureKind, Stage};
 use crate::{Error, Result};
 
 #[derive(Clone, Debug)]
@@ -341,7 +341,8 @@ impl PairFit<'_> {
 /// [`unless_trusted`](crate::features::Stage::unless_trusted) kinds' lowest-cost trusted
 /// alignment, if any, else by its [`aligned_by`](crate::features::Stage::aligned_by) kind's
 /// where trusted; when no stage's kind explains the pair within its bound, the first that
-/// explains it, else the last that aligned it at all (so a pair is not flagged for the
+/// explains it (again by its `aligned_by` kind's where trusted), else the last that aligned
+/// it at all (so a pair is not flagged for the
 /// sake of a kind that explains it worse). The band's edge plays no part in the cascade:
 /// a strong warp puts any kind's path near the edge (each kind widens its own band).
 fn align_pair<'k>(
@@ -354,6 +355,14 @@ fn align_pair<'k>(
     if cascade.is_empty() {
         return align_with(kind, human, robot, opts);
     }
+    // A kept stage's alignment, replaced by its aligned_by kind's where that is trusted.
+    let again = |stage: &Stage, fit: PairFit<'k>| {
+        stage
+            .aligned_by
+            .and_then(|k| align_with(k, human, robot, opts).ok())
+            .filter(|f| f.trusted(opts.max_cost))
+            .unwrap_or(fit)
+    };
     let (mut fits, mut errors) = (Vec::new(), Vec::new());
     for stage in cascade {
         match align_with(stage.kind, human, robot, opts) {
@@ -364,21 +373,21 @@ fn align_pair<'k>(
                     .filter_map(|&k| align_with(k, human, robot, opts).ok())
                     .filter(|f| f.trusted(opts.max_cost))
                     .min_by(|a, b| a.cost_per_dim().total_cmp(&b.cost_per_dim()));
-                let again = || {
-                    stage
-                        .aligned_by
-                        .and_then(|k| align_with(k, human, robot, opts).ok())
-                        .filter(|f| f.trusted(opts.max_cost))
-                };
-                return Ok(better.or_else(again).unwrap_or(fit));
+                return Ok(match better {
+                    Some(b) => b,
+                    None => again(stage, fit),
+                });
             }
-            Ok(fit) => fits.push(fit),
+            Ok(fit) => fits.push((stage, fit)),
             Err(e) => errors.push(format!("{}: {e}", stage.kind.name())),
         }
     }
-    match fits.iter().position(|f| f.explained(opts.max_cost)) {
-        Some(i) => Ok(fits.swap_remove(i)),
-        None => fits.pop().ok_or_else(|| errors.join("; ")),
+    match fits.iter().position(|(_, f)| f.explained(opts.max_cost)) {
+        Some(i) => {
+            let (stage, fit) = fits.swap_remove(i);
+            Ok(again(stage, fit))
+        }
+        None => fits.pop().map(|(_, f)| f).ok_or_else(|| errors.join("; ")),
     }
 }
 
@@ -1100,5 +1109,10 @@ mod tests {
         // Past its bound, the next stage decides.
         let past: &[(&'static dyn FeatureKind, f64)] = &[(&FAR, 0.01), (&NEAR, f64::INFINITY)];
         assert_eq!(picked_with(past, &[], Some(&EXACT)), Ok("near"));
+        // No stage within its bound, the first kept as the one that explains the pair: it
+        // is aligned again too (where trusted), as when kept within its bound.
+        let none: &[(&'static dyn FeatureKind, f64)] = &[(&FAR, 0.01), (&FARTHER, 0.01)];
+        assert_eq!(picked_with(none, &[], Some(&EXACT)), Ok("exact"));
+        assert_eq!(picked_with(none, &[], Some(&FAR_UNTRUSTED)), Ok("far"));
     }
 }

@@ -438,7 +438,9 @@ impl FeatureKind for Translated {
 /// motion's cost is within motion's trust bound and track's is not (a true milv-sim pair is
 /// not newly flagged), and when track cannot align it: without robot states, or when the
 /// human clip's tracked points barely move ([`HandTrack::MOVING`]: they are on a pushed
-/// object, and track would follow it; BENCHMARKS.md, "Track's points must move").
+/// object, and track would follow it; BENCHMARKS.md, "Track's points must move"). A
+/// pair that keeps motion's alignment so is aligned on [`Motion::HAND`] like any other
+/// (below).
 ///
 /// Where motion explains the pair, its tip (from frame differences) is where the scene
 /// model says the hand is, and its progress carries each embodiment's own lead (a hand's
