@@ -373,10 +373,7 @@ fn align_pair<'k>(
                     .filter_map(|&k| align_with(k, human, robot, opts).ok())
                     .filter(|f| f.trusted(opts.max_cost))
                     .min_by(|a, b| a.cost_per_dim().total_cmp(&b.cost_per_dim()));
-                return Ok(match better {
-                    Some(b) => b,
-                    None => again(stage, fit),
-                });
+                return Ok(better.unwrap_or_else(|| again(stage, fit)));
             }
             Ok(fit) => fits.push((stage, fit)),
             Err(e) => errors.push(format!("{}: {e}", stage.kind.name())),

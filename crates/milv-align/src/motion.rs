@@ -59,24 +59,31 @@ struct FrameMotion {
     border: [usize; 4],
 }
 
-/// Where the arm enters the picture through one border: the centre of the moving pixels on
-/// it, summed over the frames so far.
+/// The centre (mean position) of the pixels added to it: of a tip or hand region, and,
+/// summed over the frames so far, of the moving pixels on one border, where the arm enters.
 #[derive(Clone, Copy, Debug, Default)]
-struct Entry {
+struct Centre {
     sx: f64,
     sy: f64,
-    k: f64,
+    k: usize,
 }
 
-impl Entry {
-    fn add(&mut self, x: f64, y: f64) {
-        self.sx += x;
-        self.sy += y;
-        self.k += 1.0;
+impl Centre {
+    /// Adds pixel (x, y), at its centre.
+    fn add(&mut self, (x, y): (usize, usize)) {
+        self.sx += x as f64 + 0.5;
+        self.sy += y as f64 + 0.5;
+        self.k += 1;
+    }
+
+    fn of<'a>(pixels: impl IntoIterator<Item = &'a (usize, usize)>) -> Centre {
+        let mut c = Centre::default();
+        pixels.into_iter().for_each(|&p| c.add(p));
+        c
     }
 
     fn centre(&self) -> Option<(f64, f64)> {
-        (self.k > 0.0).then(|| (self.sx / self.k, self.sy / self.k))
+        (self.k > 0).then(|| (self.sx / self.k as f64, self.sy / self.k as f64))
     }
 }
 
@@ -116,7 +123,7 @@ fn box3(v: &[f32], w: usize, h: usize) -> Vec<f32> {
 /// The moving pixels of one motion map and their tip and hand region for every entry side;
 /// `entries` gathers each border's moving pixels over the clip, for frames with too few
 /// of their own to say where the arm enters.
-fn frame_motion(d: &[f32], w: usize, h: usize, entries: &mut [Entry; 4]) -> FrameMotion {
+fn frame_motion(d: &[f32], w: usize, h: usize, entries: &mut [Centre; 4]) -> FrameMotion {
     // Noise floor: a robust scale of the map (most pixels are still), never below
     // MIN_MOTION, so clean synthetic clips and noisy camera clips both work.
     let mut sorted = d.to_vec();
@@ -132,13 +139,12 @@ fn frame_motion(d: &[f32], w: usize, h: usize, entries: &mut [Entry; 4]) -> Fram
     // if at least 3), else over the clip so far.
     let mut enters: [Option<(f64, f64)>; 4] = [None; 4];
     for (s, side) in SIDES.iter().enumerate() {
-        let mut own = Entry::default();
-        for &(x, y) in moving.iter().filter(|&&(x, y)| side.depth(x, y, w, h) == 0) {
-            own.add(x as f64 + 0.5, y as f64 + 0.5);
-            entries[s].add(x as f64 + 0.5, y as f64 + 0.5);
-        }
-        fm.border[s] = own.k as usize;
-        enters[s] = if own.k >= 3.0 {
+        let own = Centre::of(moving.iter().filter(|&&(x, y)| side.depth(x, y, w, h) == 0));
+        entries[s].sx += own.sx;
+        entries[s].sy += own.sy;
+        entries[s].k += own.k;
+        fm.border[s] = own.k;
+        enters[s] = if own.k >= 3 {
             own.centre()
         } else {
             entries[s].centre()
@@ -164,22 +170,20 @@ fn frame_motion(d: &[f32], w: usize, h: usize, entries: &mut [Entry; 4]) -> Fram
         if far < px(TIP_BAND_128) {
             continue;
         }
+        // At least the farthest pixel lies in either band.
         let centre = |band: usize| {
-            let (mut sx, mut sy, mut k) = (0.0, 0.0, 0.0);
-            for &(x, y) in &moving {
-                if side.depth(x, y, w, h) + band >= far {
-                    sx += x as f64 + 0.5;
-                    sy += y as f64 + 0.5;
-                    k += 1.0;
-                }
-            }
-            (sx / k, sy / k)
+            Centre::of(
+                moving
+                    .iter()
+                    .filter(|&&(x, y)| side.depth(x, y, w, h) + band >= far),
+            )
+            .centre()
         };
-        fm.tips[s] = Some(centre(px(TIP_BAND_128)));
-        fm.hands[s] = Some(match enters[s] {
+        fm.tips[s] = centre(px(TIP_BAND_128));
+        fm.hands[s] = match enters[s] {
             Some(entry) => hand_region(&moving, *side, entry, w, h, px(TIP_BAND_128), px(HAND_BAND_128)),
             None => centre(px(HAND_BAND_128)),
-        });
+        };
     }
     fm
 }
@@ -190,7 +194,7 @@ fn frame_motion(d: &[f32], w: usize, h: usize, entries: &mut [Entry; 4]) -> Fram
 /// border while the hand is still coming in. Depth from the border would instead take
 /// the whole top edge of an arm lying across the picture (on milv-sim's pushing, the
 /// robot's link, whose middle then stood for the hand; BENCHMARKS.md, "The hand region
-/// measured from where the arm enters").
+/// measured from where the arm enters"). None when no pixel lies that deep.
 fn hand_region(
     moving: &[(usize, usize)],
     side: Side,
@@ -199,18 +203,11 @@ fn hand_region(
     h: usize,
     skip: usize,
     band: usize,
-) -> (f64, f64) {
+) -> Option<(f64, f64)> {
     let dist = |x: usize, y: usize| (x as f64 + 0.5 - entry.0).hypot(y as f64 + 0.5 - entry.1);
     let deep = || moving.iter().filter(|&&(x, y)| side.depth(x, y, w, h) >= skip);
-    // The caller found a pixel at least `skip` deep.
     let far = deep().map(|&(x, y)| dist(x, y)).fold(0.0, f64::max);
-    let (mut sx, mut sy, mut k) = (0.0, 0.0, 0.0);
-    for &(x, y) in deep().filter(|&&(x, y)| dist(x, y) + band as f64 >= far) {
-        sx += x as f64 + 0.5;
-        sy += y as f64 + 0.5;
-        k += 1.0;
-    }
-    (sx / k, sy / k)
+    Centre::of(deep().filter(|&&(x, y)| dist(x, y) + band as f64 >= far)).centre()
 }
 
 /// What [`TipTracker::finish`] found in a clip.
@@ -233,7 +230,7 @@ pub struct TipTracker {
     h: usize,
     n: usize,
     frames: Vec<FrameMotion>,
-    entries: [Entry; 4],
+    entries: [Centre; 4],
     /// Frames t−1 and t of the sliding window (the map of t needs t+1).
     window: Vec<Vec<u8>>,
     background: Vec<Vec<u8>>,
@@ -249,7 +246,7 @@ impl TipTracker {
             h,
             n,
             frames: Vec::with_capacity(n),
-            entries: [Entry::default(); 4],
+            entries: [Centre::default(); 4],
             window: Vec::new(),
             background: Vec::new(),
             sample_every: n.div_ceil(BACKGROUND_SAMPLES).max(1),
@@ -598,7 +595,7 @@ mod tests {
         // level across the picture (rows 56..60) to a gripper at x 100..106 (rows 55..61).
         let (w, h) = (128usize, 128usize);
         let d = moving_map(w, h, &[(10, 58, 14, 128), (14, 56, 100, 60), (100, 55, 106, 61)]);
-        let fm = frame_motion(&d, w, h, &mut [Entry::default(); 4]);
+        let fm = frame_motion(&d, w, h, &mut [Centre::default(); 4]);
         let (tip, hand) = (fm.tips[0].unwrap(), fm.hands[0].unwrap());
         // Depth from the border takes the forearm's whole top edge: the tip is mid-link.
         assert!(tip.0 < 70.0, "{tip:?}");
@@ -611,7 +608,7 @@ mod tests {
         // Only a 24 px wide blob on the bottom rows moves: the hand entering the picture.
         let (w, h) = (128usize, 128usize);
         let d = moving_map(w, h, &[(48, 116, 72, 128)]);
-        let mut entries = [Entry::default(); 4];
+        let mut entries = [Centre::default(); 4];
         let fm = frame_motion(&d, w, h, &mut entries);
         let hand = fm.hands[0].unwrap();
         // The border's rows (within the tip band, 8 px) are where the arm enters; the
@@ -626,7 +623,7 @@ mod tests {
         // An arm from the bottom border up to row 40: a 4 px forearm under a 10 px hand.
         let (w, h) = (128usize, 128usize);
         let d = moving_map(w, h, &[(59, 40, 69, 50), (62, 50, 66, 128)]);
-        let fm = frame_motion(&d, w, h, &mut [Entry::default(); 4]);
+        let fm = frame_motion(&d, w, h, &mut [Centre::default(); 4]);
         let (tip, hand) = (fm.tips[0].unwrap(), fm.hands[0].unwrap());
         // Rows 40..=48 against the pixels within 12 px of the farthest from the entry
         // (x 64 on the bottom row): the hand down to row 51 (the forearm's narrow rows
