@@ -61,9 +61,8 @@ struct Common {
     /// motion's cost is within its trust bound or the human clip's tracked points travel
     /// less than a tenth as far as motion's tip (a pushed object, not the hand: motion's
     /// cost decides, flagged if untrusted, and motion-hand aligns where trusted); where
-    /// motion fits, track instead when its
-    /// path stays off the band's edge and its points travel as far as motion's tip (on the
-    /// hand; points seeded through the clip or in its first frame, whichever fit costs
+    /// motion fits, track instead when its path stays off the band's edge and its points
+    /// travel as far as motion's tip (on the hand; points seeded through the clip or in its first frame, whichever fit costs
     /// less), else motion-hand (motion's features from the hand region, deeper than the
     /// tip, nearer the end effector); the report names the kind used per pair;
     /// motion: progress and heading of the arm's tip, tracked from frame differences and

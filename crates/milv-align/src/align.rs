@@ -342,8 +342,7 @@ impl PairFit<'_> {
 /// alignment, if any, else by its [`aligned_by`](crate::features::Stage::aligned_by) kind's
 /// where trusted; when no stage's kind explains the pair within its bound, the first that
 /// explains it (again by its `aligned_by` kind's where trusted), else the last that aligned
-/// it at all (so a pair is not flagged for the
-/// sake of a kind that explains it worse). The band's edge plays no part in the cascade:
+/// it at all (so a pair is not flagged for the sake of a kind that explains it worse). The band's edge plays no part in the cascade:
 /// a strong warp puts any kind's path near the edge (each kind widens its own band).
 fn align_pair<'k>(
     kind: &'k dyn FeatureKind,

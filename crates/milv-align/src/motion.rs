@@ -21,8 +21,8 @@ const MIN_MOTION: f32 = 12.0;
 /// The tip region: moving pixels within this many pixels (at 128 px) of the farthest one.
 const TIP_BAND_128: f64 = 8.0;
 /// The hand region, deeper: its centre is nearer the end effector than the tip's (on the
-/// milv-sim sets 12 px aligned best of 8–24 measured as depth from the border, and of
-/// 8–16 measured from the arm's entry, with 14; BENCHMARKS.md).
+/// milv-sim sets 12 px aligned best of 8–24 measured as depth from the border, and tied
+/// with 14 of 8–16 measured from the arm's entry; BENCHMARKS.md).
 const HAND_BAND_128: f64 = 12.0;
 /// At most this many frames go into the median frame the table is found in.
 const BACKGROUND_SAMPLES: usize = 32;
@@ -74,6 +74,13 @@ impl Centre {
         self.sx += x as f64 + 0.5;
         self.sy += y as f64 + 0.5;
         self.k += 1;
+    }
+
+    /// Adds every pixel another centre holds.
+    fn merge(&mut self, other: Centre) {
+        self.sx += other.sx;
+        self.sy += other.sy;
+        self.k += other.k;
     }
 
     fn of<'a>(pixels: impl IntoIterator<Item = &'a (usize, usize)>) -> Centre {
@@ -140,9 +147,7 @@ fn frame_motion(d: &[f32], w: usize, h: usize, entries: &mut [Centre; 4]) -> Fra
     let mut enters: [Option<(f64, f64)>; 4] = [None; 4];
     for (s, side) in SIDES.iter().enumerate() {
         let own = Centre::of(moving.iter().filter(|&&(x, y)| side.depth(x, y, w, h) == 0));
-        entries[s].sx += own.sx;
-        entries[s].sy += own.sy;
-        entries[s].k += own.k;
+        entries[s].merge(own);
         fm.border[s] = own.k;
         enters[s] = if own.k >= 3 {
             own.centre()
